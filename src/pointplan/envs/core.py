@@ -1,0 +1,170 @@
+"""The batched core shared by the single and the vector environment.
+
+``E`` workspaces step together: one collision query answers every sub-step of every
+environment, one observer call observes them all.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geometry.collision import CollisionWorld
+from ..observers import make_observer
+from ..robots.base import Robot
+from ..scenes.scenarios import Scenario
+from ..scenes.scene import Problem, Scene
+
+Array = NDArray[np.float64]
+Bool = NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Settings of a planning environment (keyword arguments of ``gymnasium.make``)."""
+
+    #: observation type: ``surface``, ``surface-normals``, ``interior``, ``image``
+    observation: str = "surface-normals"
+    #: number of observed points (point observers)
+    n_points: int = 64
+    #: ``train`` or ``test`` workspaces
+    split: str = "train"
+    #: episode length; ``None`` takes the scenario's (50 for 2D-Narrow)
+    horizon: int | None = None
+    #: success when the geodesic distance to the goal is below this (and no collision)
+    goal_tolerance: float = 0.07
+    #: largest sub-step of ``q_free`` (geodesic distance)
+    substep: float = 0.01
+    reward_free: float = -0.1
+    reward_collision: float = -4.0
+    reward_success: float = 20.0
+
+
+def q_free(
+    robot: Robot,
+    world: CollisionWorld,
+    q: Array,
+    twist: Array,
+    low: Array,
+    high: Array,
+    substep: float = 0.01,
+) -> tuple[Array, Bool, NDArray[np.int64]]:
+    """Walk ``q -> q * exp(twist)`` in sub-steps of at most ``substep`` and stop at the last
+    free one.
+
+    ``q: (E, config_dim)``, ``twist: (E, twist_dim)``, ``world`` stacked over ``E`` (or a
+    single world), ``low, high: (E, d)``. Every sub-configuration is clipped to the bounds
+    *before* it is checked, so the returned configuration is both inside the bounds and
+    free. Returns the new configurations, whether any sub-step collided, and the number of
+    collision checks per environment. A move shorter than ``substep`` is still checked.
+    """
+    q = np.asarray(q, np.float64)
+    twist = np.asarray(twist, np.float64)
+    norm = np.linalg.norm(twist, axis=-1)
+    n = np.maximum(1, np.ceil(norm / substep - 1e-9)).astype(np.int64)
+    nmax = int(n.max())
+    k = np.arange(1, nmax + 1)
+    s = np.minimum(k[None, :] / n[:, None], 1.0)  # (E, nmax); extra sub-steps repeat the end
+    qs = robot.integrate(np.broadcast_to(q[:, None], (q.shape[0], nmax, q.shape[1])), twist[:, None] * s[..., None])
+    qs = robot.clip(qs, low[:, None], high[:, None])
+    hit = robot.collides(world, qs)
+    hit &= k[None, :] <= n[:, None]
+    collided = hit.any(-1)
+    first = np.where(collided, hit.argmax(-1), n)  # index of the first colliding sub-step
+    last = first - 1
+    rows = np.arange(q.shape[0])
+    new_q = np.where((last >= 0)[:, None], qs[rows, np.maximum(last, 0)], q)
+    return new_q, collided, n
+
+
+class BatchedCore:
+    """``E`` planning environments of one scenario stepping in lockstep."""
+
+    def __init__(self, scenario: Scenario, num_envs: int, config: EnvConfig) -> None:
+        if config.split not in ("train", "test"):
+            raise ValueError(f"split must be 'train' or 'test', not {config.split!r}")
+        self.scenario = scenario
+        self.robot: Robot = scenario.robot
+        self.config = config
+        self.num_envs = int(num_envs)
+        self.horizon = int(config.horizon or scenario.horizon)
+        kwargs: dict[str, Any] = {}
+        if config.observation != "image":
+            kwargs["n_points"] = config.n_points
+        self.observer = make_observer(config.observation, self.robot, **kwargs)
+        e, c = self.num_envs, self.robot.config_dim
+        self.q = np.zeros((e, c))
+        self.goal = np.zeros((e, c))
+        self.t = np.zeros(e, dtype=np.int64)
+        self.scenes: list[Scene | None] = [None] * e
+        self.low = np.zeros((e, self.robot.dim))
+        self.high = np.ones((e, self.robot.dim))
+        self._world: CollisionWorld | None = None
+
+    # ------------------------------------------------------------------ resets
+    def reset_envs(self, idx: Sequence[int], rng: np.random.Generator, problems: Sequence[Problem | None] | None = None) -> None:
+        """Start new episodes in environments ``idx``: a new workspace and problem each,
+        drawn from ``rng``, or the given problems."""
+        for j, i in enumerate(idx):
+            prob = problems[j] if problems is not None else None
+            if prob is None:
+                scene = self.scenario.scene(self.config.split, int(rng.integers(0, 2**31 - 1)))
+                start, goal = self.scenario.sample_problem(scene, rng)
+            else:
+                if prob.scene.dim != self.robot.dim or prob.start.shape != (self.robot.config_dim,):
+                    raise ValueError(
+                        f"problem {prob.tag or ''} does not fit robot {self.robot.name} "
+                        f"(start has {prob.start.shape[0]} coordinates, expected {self.robot.config_dim})"
+                    )
+                scene, start, goal = prob.scene, prob.start, prob.goal
+            if self.scenes[i] is not scene:
+                self.scenes[i] = scene
+                self._world = None
+                if len(self.observer.scenes) < self.num_envs:
+                    self.observer.bind([s if s is not None else scene for s in self.scenes])
+                else:
+                    self.observer.set_scene(i, scene)
+            self.q[i], self.goal[i], self.t[i] = start, goal, 0
+            self.low[i], self.high[i] = scene.low, scene.high
+
+    @property
+    def world(self) -> CollisionWorld:
+        if self._world is None:
+            scenes = [s for s in self.scenes if s is not None]
+            if len(scenes) != self.num_envs:
+                raise RuntimeError("reset every environment before stepping")
+            self._world = CollisionWorld.stack([s.world for s in scenes])
+        return self._world
+
+    # ------------------------------------------------------------------ step
+    def observe(self, rng: np.random.Generator) -> dict[str, NDArray[np.float32]]:
+        return {
+            "observation": self.observer.observe(self.q, rng),
+            "achieved_goal": self.q.astype(np.float32),
+            "desired_goal": self.goal.astype(np.float32),
+        }
+
+    def success(self, achieved: Array, desired: Array, collided: Bool | None = None) -> Bool:
+        ok = self.robot.distance(achieved, desired) < self.config.goal_tolerance
+        return ok if collided is None else ok & ~np.asarray(collided, bool)
+
+    def reward(self, action_norm: Array, collided: Bool, success: Bool) -> Array:
+        c = self.config
+        return -np.asarray(action_norm) + np.where(collided, c.reward_collision, c.reward_free) + c.reward_success * success
+
+    def step(self, actions: Array) -> tuple[Array, Bool, Bool, dict[str, Any]]:
+        """Apply actions ``(E, twist_dim)`` in [-1, 1]: returns reward, terminated,
+        truncated and per-environment info arrays. Observations come from ``observe``."""
+        a = np.clip(np.asarray(actions, np.float64).reshape(self.num_envs, self.robot.twist_dim), -1.0, 1.0)
+        twist = a * self.robot.action_scale
+        self.q, collided, checks = q_free(self.robot, self.world, self.q, twist, self.low, self.high, self.config.substep)
+        self.t += 1
+        success = self.success(self.q, self.goal, collided)
+        action_norm = np.linalg.norm(a, axis=-1)
+        reward = self.reward(action_norm, collided, success)
+        truncated = (self.t >= self.horizon) & ~success
+        info = {"collided": collided, "is_success": success, "action_norm": action_norm, "collision_checks": checks}
+        return reward, success, truncated, info

@@ -1,0 +1,373 @@
+"""Batched collision of robot bodies against a scene's obstacles.
+
+A :class:`CollisionWorld` packs a scene's obstacles into arrays, one group per shape type.
+Worlds of several scenes can be stacked (``CollisionWorld.stack``) into one world with a
+leading batch dimension ``E``: obstacle groups are padded with empty shapes far away, so a
+query ``(E, M, ...)`` is answered for every scene at once with no Python loop over scenes,
+configurations or obstacles.
+
+Robot bodies are unions of spheres and oriented boxes. Pairs handled in closed form:
+sphere vs {box, sphere, capsule, cylinder, points} in 2D and 3D, box vs {box (separating
+axis test), sphere, points} in 3D. Meshes, and box vs capsule/cylinder, go through coal.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from .shapes import Box, Capsule, Cylinder, Mesh, PointCloud, Shape, Sphere
+
+Array = NDArray[np.float64]
+Bool = NDArray[np.bool_]
+
+_FAR = 1e6
+
+
+# ---------------------------------------------------------------------------- kernels
+def sphere_box_sqdist(c: Array, bc: Array, br: Array, bh: Array) -> Array:
+    """Squared distance from points ``c: (..., M, d)`` to solid boxes ``(..., K, ...)``.
+
+    Returns ``(..., M, K)``; zero inside a box.
+    """
+    diff = c[..., :, None, :] - bc[..., None, :, :]
+    local = np.einsum("...kji,...mkj->...mki", br, diff)
+    excess = np.maximum(np.abs(local) - bh[..., None, :, :], 0.0)
+    return np.einsum("...i,...i->...", excess, excess)
+
+
+def sphere_sphere_sqdist(c: Array, sc: Array) -> Array:
+    """Squared centre distances ``(..., M, K)``."""
+    diff = c[..., :, None, :] - sc[..., None, :, :]
+    return np.einsum("...i,...i->...", diff, diff)
+
+
+def point_segment_sqdist(c: Array, a: Array, b: Array) -> Array:
+    """Squared distance from points ``(..., M, d)`` to segments ``a, b: (..., K, d)``."""
+    ab = b - a
+    denom = np.maximum(np.einsum("...i,...i->...", ab, ab), 1e-18)
+    ac = c[..., :, None, :] - a[..., None, :, :]
+    t = np.clip(np.einsum("...mki,...ki->...mk", ac, ab) / denom[..., None, :], 0.0, 1.0)
+    d = ac - t[..., None] * ab[..., None, :, :]
+    return np.einsum("...i,...i->...", d, d)
+
+
+def point_cylinder_sqdist(c: Array, cc: Array, cr: Array, rad: Array, half: Array) -> Array:
+    """Squared distance from points to solid cylinders along their local z axis."""
+    diff = c[..., :, None, :] - cc[..., None, :, :]
+    local = np.einsum("...kji,...mkj->...mki", cr, diff)
+    rho = np.linalg.norm(local[..., :2], axis=-1)
+    dr = np.maximum(rho - rad[..., None, :], 0.0)
+    dz = np.maximum(np.abs(local[..., 2]) - half[..., None, :], 0.0)
+    return dr * dr + dz * dz
+
+
+def obb_overlap(ca: Array, ra: Array, ha: Array, cb: Array, rb: Array, hb: Array) -> Bool:
+    """Separating-axis test between 3D boxes A ``(..., M, ...)`` and B ``(..., K, ...)``.
+
+    Returns ``(..., M, K)``: True where the closed boxes overlap.
+    """
+    rel = np.einsum("...mji,...kjl->...mkil", ra, rb)  # R = Ra^T Rb
+    t = np.einsum("...mji,...mkj->...mki", ra, cb[..., None, :, :] - ca[..., :, None, :])
+    absr = np.abs(rel) + 1e-9
+    hA = ha[..., :, None, :]  # (..., M, 1, 3)
+    hB = hb[..., None, :, :]  # (..., 1, K, 3)
+    # Face axes of A and of B.
+    sep = np.any(np.abs(t) > hA + np.einsum("...ij,...j->...i", absr, np.broadcast_to(hB, t.shape)), -1)
+    tb = np.einsum("...i,...ij->...j", t, rel)
+    sep |= np.any(np.abs(tb) > np.einsum("...i,...ij->...j", np.broadcast_to(hA, t.shape), absr) + hB, -1)
+    # Nine edge-edge axes A_i x B_j.
+    i1, i2 = np.array([1, 2, 0]), np.array([2, 0, 1])
+    ta1 = t[..., i1][..., :, None]
+    ta2 = t[..., i2][..., :, None]
+    lhs = np.abs(ta2 * rel[..., i1, :] - ta1 * rel[..., i2, :])
+    hAb = np.broadcast_to(hA, t.shape)
+    hBb = np.broadcast_to(hB, t.shape)
+    ra_term = hAb[..., i1][..., :, None] * absr[..., i2, :] + hAb[..., i2][..., :, None] * absr[..., i1, :]
+    rb_term = hBb[..., None, i1] * absr[..., :, i2] + hBb[..., None, i2] * absr[..., :, i1]
+    sep |= np.any(lhs > ra_term + rb_term, axis=(-1, -2))
+    return ~sep
+
+
+# ---------------------------------------------------------------------------- world
+@dataclass
+class CollisionWorld:
+    """Obstacles of one scene (batch shape ``()``) or of ``E`` stacked scenes (``(E,)``)."""
+
+    dim: int
+    box_c: Array
+    box_r: Array
+    box_h: Array
+    sph_c: Array
+    sph_r: Array
+    cap_a: Array
+    cap_b: Array
+    cap_r: Array
+    cyl_c: Array
+    cyl_r: Array
+    cyl_rad: Array
+    cyl_half: Array
+    #: per scene: point clouds (merged) as a KD-tree, or None
+    cloud_trees: list[cKDTree | None] = field(default_factory=list)
+    #: per scene: coal collision objects of meshes (and primitives coal must handle)
+    coal_objects: list[list[tuple[Any, Any]]] = field(default_factory=list)
+    #: per scene: shapes kept for the coal fallback (capsules, cylinders)
+    shapes: list[list[Shape]] = field(default_factory=list)
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        return self.box_c.shape[:-2]
+
+    # ------------------------------------------------------------------ build
+    @classmethod
+    def from_shapes(cls, shapes: Sequence[Shape], dim: int) -> "CollisionWorld":
+        """Pack world-frame shapes of one scene."""
+        boxes = [s for s in shapes if isinstance(s, Box)]
+        spheres = [s for s in shapes if isinstance(s, Sphere)]
+        caps = [s for s in shapes if isinstance(s, Capsule)]
+        cyls = [s for s in shapes if isinstance(s, Cylinder)]
+        meshes = [s for s in shapes if isinstance(s, Mesh)]
+        clouds = [s for s in shapes if isinstance(s, PointCloud)]
+        for s in shapes:
+            if s.dim != dim:
+                raise ValueError(f"{type(s).__name__} is {s.dim}D in a {dim}D scene")
+        if dim == 2 and (cyls or meshes):
+            raise ValueError("cylinders and meshes are 3D shapes")
+        d = dim
+
+        def arr(xs: list[Array], shape: tuple[int, ...]) -> Array:
+            return np.stack(xs).astype(np.float64) if xs else np.zeros((0,) + shape)
+
+        tree = None
+        if clouds:
+            tree = cKDTree(np.concatenate([c.points for c in clouds]))
+        coal_objs = [_coal_mesh(m) for m in meshes]
+        return cls(
+            dim=d,
+            box_c=arr([b.center for b in boxes], (d,)),
+            box_r=arr([b.rotation for b in boxes], (d, d)),
+            box_h=arr([b.half for b in boxes], (d,)),
+            sph_c=arr([s.center for s in spheres], (d,)),
+            sph_r=np.array([s.radius for s in spheres], dtype=np.float64),
+            cap_a=arr([c.a for c in caps], (d,)),
+            cap_b=arr([c.b for c in caps], (d,)),
+            cap_r=np.array([c.radius for c in caps], dtype=np.float64),
+            cyl_c=arr([c.center for c in cyls], (3,)) if d == 3 else np.zeros((0, 3)),
+            cyl_r=arr([c.rotation for c in cyls], (3, 3)) if d == 3 else np.zeros((0, 3, 3)),
+            cyl_rad=np.array([c.radius for c in cyls], dtype=np.float64),
+            cyl_half=np.array([c.length / 2 for c in cyls], dtype=np.float64),
+            cloud_trees=[tree],
+            coal_objects=[coal_objs],
+            shapes=[list(caps) + list(cyls)],
+        )
+
+    @classmethod
+    def stack(cls, worlds: Sequence["CollisionWorld"]) -> "CollisionWorld":
+        """Stack single-scene worlds into one with batch shape ``(E,)``, padding each group."""
+        if not worlds:
+            raise ValueError("nothing to stack")
+        dim = worlds[0].dim
+        if any(w.dim != dim or w.batch_shape != () for w in worlds):
+            raise ValueError("stack takes single-scene worlds of one dimension")
+
+        def pad(name: str, fill: Array) -> Array:
+            xs = [getattr(w, name) for w in worlds]
+            k = max(x.shape[0] for x in xs)
+            out = np.empty((len(xs), k) + xs[0].shape[1:])
+            out[...] = fill
+            for i, x in enumerate(xs):
+                out[i, : x.shape[0]] = x
+            return out
+
+        d = dim
+        return cls(
+            dim=d,
+            box_c=pad("box_c", np.full(d, _FAR)),
+            box_r=pad("box_r", np.eye(d)),
+            box_h=pad("box_h", np.zeros(d)),
+            sph_c=pad("sph_c", np.full(d, _FAR)),
+            sph_r=pad("sph_r", np.zeros(())),
+            cap_a=pad("cap_a", np.full(d, _FAR)),
+            cap_b=pad("cap_b", np.full(d, _FAR)),
+            cap_r=pad("cap_r", np.zeros(())),
+            cyl_c=pad("cyl_c", np.full(3, _FAR)),
+            cyl_r=pad("cyl_r", np.eye(3)),
+            cyl_rad=pad("cyl_rad", np.zeros(())),
+            cyl_half=pad("cyl_half", np.zeros(())),
+            cloud_trees=[w.cloud_trees[0] for w in worlds],
+            coal_objects=[w.coal_objects[0] for w in worlds],
+            shapes=[w.shapes[0] for w in worlds],
+        )
+
+    # ------------------------------------------------------------------ queries
+    def _per_scene(self, x: Array) -> list[Array]:
+        """Split a query array ``(*batch, M, ...)`` into one array per scene."""
+        if self.batch_shape == ():
+            return [x]
+        return [x[i] for i in range(self.batch_shape[0])]
+
+    def spheres_collide(self, centers: Array, radii: Array | float) -> Bool:
+        """Do spheres ``centers: (*batch, M, d)`` of ``radii`` (scalar or ``(*batch, M)``) hit?"""
+        c = np.asarray(centers, np.float64)
+        r = np.broadcast_to(np.asarray(radii, np.float64), c.shape[:-1])
+        r2 = (r * r)[..., None]
+        hit = np.zeros(c.shape[:-1], dtype=bool)
+        if self.box_c.shape[-2]:
+            hit |= np.any(sphere_box_sqdist(c, self.box_c, self.box_r, self.box_h) <= r2, -1)
+        if self.sph_c.shape[-2]:
+            rr = r[..., None] + self.sph_r[..., None, :]
+            hit |= np.any(sphere_sphere_sqdist(c, self.sph_c) <= rr * rr, -1)
+        if self.cap_a.shape[-2]:
+            rr = r[..., None] + self.cap_r[..., None, :]
+            hit |= np.any(point_segment_sqdist(c, self.cap_a, self.cap_b) <= rr * rr, -1)
+        if self.dim == 3 and self.cyl_c.shape[-2]:
+            d2 = point_cylinder_sqdist(c, self.cyl_c, self.cyl_r, self.cyl_rad, self.cyl_half)
+            hit |= np.any(d2 <= r2, -1)
+        hit |= self._spheres_vs_clouds(c, r)
+        hit |= self._coal_query(c, r, kind="sphere", meshes_only=True)
+        return hit
+
+    def boxes_collide(self, centers: Array, rotations: Array, halfs: Array) -> Bool:
+        """Do 3D boxes ``centers: (*batch, M, 3)``, ``rotations: (*batch, M, 3, 3)``,
+        ``halfs: (*batch, M, 3)`` (half sides) hit any obstacle?"""
+        if self.dim != 3:
+            raise NotImplementedError("box-shaped robot parts are supported in 3D only")
+        c = np.asarray(centers, np.float64)
+        rot = np.asarray(rotations, np.float64)
+        h = np.broadcast_to(np.asarray(halfs, np.float64), c.shape)
+        hit = np.zeros(c.shape[:-1], dtype=bool)
+        if self.box_c.shape[-2]:
+            hit |= np.any(obb_overlap(c, rot, h, self.box_c, self.box_r, self.box_h), -1)
+        if self.sph_c.shape[-2]:
+            # distance from each obstacle sphere centre to each robot box
+            d2 = sphere_box_sqdist(self.sph_c, c, rot, h)  # (*batch, K, M)
+            hit |= np.any(d2 <= (self.sph_r**2)[..., :, None], -2)
+        if any(t is not None for t in self.cloud_trees):
+            for i, (ci, ri, hi) in enumerate(zip(self._per_scene(c), self._per_scene(rot), self._per_scene(h))):
+                tree = self.cloud_trees[i]
+                if tree is None:
+                    continue
+                pts = tree.data
+                d2 = sphere_box_sqdist(pts, ci, ri, hi)  # (P, M)
+                inside = np.any(d2 <= 0.0, 0)
+                if self.batch_shape == ():
+                    hit |= inside
+                else:
+                    hit[i] |= inside
+        hit |= self._coal_query((c, rot, h), None, kind="box", meshes_only=False)
+        return hit
+
+    def _spheres_vs_clouds(self, c: Array, r: Array) -> Bool:
+        out = np.zeros(c.shape[:-1], dtype=bool)
+        for i, (ci, ri) in enumerate(zip(self._per_scene(c), self._per_scene(r))):
+            tree = self.cloud_trees[i] if i < len(self.cloud_trees) else None
+            if tree is None:
+                continue
+            flat = ci.reshape(-1, self.dim)
+            rmax = float(ri.max()) if ri.size else 0.0
+            dist, _ = tree.query(flat, k=1, distance_upper_bound=rmax + 1e-12)
+            res = (dist <= ri.reshape(-1)).reshape(ci.shape[:-1])
+            if self.batch_shape == ():
+                out |= res
+            else:
+                out[i] |= res
+        return out
+
+    def _coal_query(self, q: Any, r: Array | None, kind: str, meshes_only: bool) -> Bool:
+        """Slow path through coal, one configuration at a time (meshes and rare pairs)."""
+        if kind == "sphere":
+            c = q
+            shape = c.shape[:-1]
+        else:
+            c, rot, h = q
+            shape = c.shape[:-1]
+        out = np.zeros(shape, dtype=bool)
+        scenes = range(1) if self.batch_shape == () else range(self.batch_shape[0])
+        for i in scenes:
+            objs = list(self.coal_objects[i])
+            if not meshes_only:
+                objs += [_coal_primitive(s) for s in self.shapes[i]]
+            if not objs:
+                continue
+            ci = c if self.batch_shape == () else c[i]
+            flat_c = ci.reshape(-1, ci.shape[-1])
+            res = np.zeros(flat_c.shape[0], dtype=bool)
+            if kind == "sphere":
+                assert r is not None
+                ri = (r if self.batch_shape == () else r[i]).reshape(-1)
+                for m in range(flat_c.shape[0]):
+                    res[m] = any(
+                        coal_collide_sphere(flat_c[m], ri[m], g, tf) for g, tf in objs
+                    )
+            else:
+                roti = (rot if self.batch_shape == () else rot[i]).reshape(-1, 3, 3)
+                hi = (h if self.batch_shape == () else h[i]).reshape(-1, 3)
+                for m in range(flat_c.shape[0]):
+                    res[m] = any(coal_collide_box(flat_c[m], roti[m], hi[m], g, tf) for g, tf in objs)
+            res = res.reshape(ci.shape[:-1])
+            if self.batch_shape == ():
+                out |= res
+            else:
+                out[i] |= res
+        return out
+
+
+# ---------------------------------------------------------------------------- coal glue
+def _coal() -> Any:
+    import coal  # imported lazily: only meshes and rare pairs need it
+
+    return coal
+
+
+def _coal_tf(rotation: Array, translation: Array) -> Any:
+    coal = _coal()
+    return coal.Transform3s(np.asarray(rotation, np.float64), np.asarray(translation, np.float64))
+
+
+def _coal_mesh(m: Mesh) -> tuple[Any, Any]:
+    coal = _coal()
+    model = coal.BVHModelOBBRSS()
+    model.beginModel(len(m.faces), len(m.vertices))
+    model.addSubModel(m.vertices, m.faces)
+    model.endModel()
+    return model, _coal_tf(np.eye(3), np.zeros(3))
+
+
+def _coal_primitive(s: Shape) -> tuple[Any, Any]:
+    coal = _coal()
+    if isinstance(s, Capsule):
+        axis = s.b - s.a
+        length = float(np.linalg.norm(axis))
+        return coal.Capsule(s.radius, length), _coal_tf(_rotation_to_z(axis), (s.a + s.b) / 2)
+    if isinstance(s, Cylinder):
+        return coal.Cylinder(s.radius, s.length), _coal_tf(s.rotation, s.center)
+    raise TypeError(f"no coal fallback for {type(s).__name__}")
+
+
+def _rotation_to_z(axis: Array) -> Array:
+    """A rotation whose third column is ``axis`` (normalised)."""
+    z = np.asarray(axis, np.float64)
+    n = np.linalg.norm(z)
+    z = z / n if n > 0 else np.array([0.0, 0.0, 1.0])
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return np.stack([x, y, z], 1)
+
+
+def coal_collide_sphere(center: Array, radius: float, geom: Any, tf: Any) -> bool:
+    coal = _coal()
+    req, res = coal.CollisionRequest(), coal.CollisionResult()
+    return bool(coal.collide(coal.Sphere(float(radius)), _coal_tf(np.eye(3), center), geom, tf, req, res))
+
+
+def coal_collide_box(center: Array, rotation: Array, half: Array, geom: Any, tf: Any) -> bool:
+    coal = _coal()
+    req, res = coal.CollisionRequest(), coal.CollisionResult()
+    box = coal.Box(*(2.0 * np.asarray(half, np.float64)))
+    return bool(coal.collide(box, _coal_tf(rotation, center), geom, tf, req, res))

@@ -1,0 +1,153 @@
+"""Obstacle shapes, in the world frame.
+
+Sizes follow one convention everywhere: boxes take *full* side lengths, capsules and
+cylinders a radius and a full length along their local z axis. 2D scenes use the same
+classes with 2-vectors (boxes with a 2x2 rotation; spheres are discs).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Union
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+
+def _vec(x: object, n: int | None = None) -> Array:
+    a = np.asarray(x, dtype=np.float64).reshape(-1)
+    if n is not None and a.shape != (n,):
+        raise ValueError(f"expected {n} numbers, got {a.shape[0]}")
+    return a
+
+
+@dataclass(frozen=True)
+class Box:
+    """Oriented box: ``center: (d,)``, full side lengths ``size: (d,)``, ``rotation: (d, d)``."""
+
+    center: Array
+    size: Array
+    rotation: Array = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        c = _vec(self.center)
+        object.__setattr__(self, "center", c)
+        object.__setattr__(self, "size", _vec(self.size, c.shape[0]))
+        rot = np.eye(c.shape[0]) if self.rotation is None else np.asarray(self.rotation, np.float64)
+        object.__setattr__(self, "rotation", rot.reshape(c.shape[0], c.shape[0]))
+
+    @property
+    def dim(self) -> int:
+        return int(self.center.shape[0])
+
+    @property
+    def half(self) -> Array:
+        return self.size / 2.0
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """Sphere (a disc in 2D)."""
+
+    center: Array
+    radius: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "center", _vec(self.center))
+        object.__setattr__(self, "radius", float(self.radius))
+
+    @property
+    def dim(self) -> int:
+        return int(self.center.shape[0])
+
+
+@dataclass(frozen=True)
+class Capsule:
+    """All points within ``radius`` of the segment ``a -> b``."""
+
+    a: Array
+    b: Array
+    radius: float
+
+    def __post_init__(self) -> None:
+        a = _vec(self.a)
+        object.__setattr__(self, "a", a)
+        object.__setattr__(self, "b", _vec(self.b, a.shape[0]))
+        object.__setattr__(self, "radius", float(self.radius))
+
+    @property
+    def dim(self) -> int:
+        return int(self.a.shape[0])
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    """Solid cylinder (3D only) around the local z axis of ``rotation``, full ``length``."""
+
+    center: Array
+    radius: float
+    length: float
+    rotation: Array = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "center", _vec(self.center, 3))
+        object.__setattr__(self, "radius", float(self.radius))
+        object.__setattr__(self, "length", float(self.length))
+        rot = np.eye(3) if self.rotation is None else np.asarray(self.rotation, np.float64)
+        object.__setattr__(self, "rotation", rot.reshape(3, 3))
+
+    @property
+    def dim(self) -> int:
+        return 3
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """Triangle mesh in the world frame (3D only): ``vertices: (V, 3)``, ``faces: (F, 3)``."""
+
+    vertices: Array
+    faces: NDArray[np.int64]
+    source: Path | None = None
+
+    def __post_init__(self) -> None:
+        v = np.asarray(self.vertices, np.float64).reshape(-1, 3)
+        f = np.asarray(self.faces, np.int64).reshape(-1, 3)
+        object.__setattr__(self, "vertices", v)
+        object.__setattr__(self, "faces", f)
+
+    @property
+    def dim(self) -> int:
+        return 3
+
+
+@dataclass(frozen=True)
+class PointCloud:
+    """Observed obstacle points with outward normals: ``points, normals: (P, d)``.
+
+    For collision a point cloud counts as a set of points: the robot collides when a point
+    lies inside its body.
+    """
+
+    points: Array
+    normals: Array
+    source: Path | None = None
+
+    def __post_init__(self) -> None:
+        p = np.asarray(self.points, np.float64)
+        if p.ndim != 2:
+            raise ValueError("points must be a (P, d) array")
+        n = np.asarray(self.normals, np.float64).reshape(p.shape)
+        norm = np.linalg.norm(n, axis=1, keepdims=True)
+        n = np.where(norm > 0, n / np.where(norm > 0, norm, 1.0), 0.0)
+        object.__setattr__(self, "points", p)
+        object.__setattr__(self, "normals", n)
+
+    @property
+    def dim(self) -> int:
+        return int(self.points.shape[1])
+
+
+Shape = Union[Box, Sphere, Capsule, Cylinder, Mesh, PointCloud]

@@ -1,0 +1,130 @@
+"""Observers: what the robot sees of the obstacles, in its own frame.
+
+An observer is bound to the ``E`` scenes of a (vector) environment; ``set_scene`` swaps one
+slot when that environment resets, and ``observe`` answers for all ``E`` configurations at
+once.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from ..robots.base import Robot
+from ..scenes.scene import Scene
+
+Array = NDArray[np.float64]
+
+
+class Observer(ABC):
+    """Base class. Subclasses define ``name``, ``space`` and ``observe``."""
+
+    name: str
+
+    def __init__(self, robot: Robot) -> None:
+        self.robot = robot
+        self.scenes: list[Scene] = []
+
+    def bind(self, scenes: list[Scene]) -> None:
+        """Prepare for a batch of scenes (one per environment)."""
+        self.scenes = list(scenes)
+        for i, s in enumerate(scenes):
+            self.set_scene(i, s)
+
+    def set_scene(self, i: int, scene: Scene) -> None:
+        """Replace the scene of environment ``i``."""
+        if i == len(self.scenes):
+            self.scenes.append(scene)
+        self.scenes[i] = scene
+
+    @property
+    @abstractmethod
+    def space(self) -> spaces.Box:
+        """The observation space of one environment."""
+
+    @abstractmethod
+    def observe(self, q: Array, rng: np.random.Generator) -> NDArray[np.float32]:
+        """Observations of configurations ``q: (E, config_dim)``, one per bound scene."""
+
+
+class PointSetObserver(Observer):
+    """Shared machinery: a fixed point set per scene, resized to ``n_points`` each call by a
+    random subset (or padded by duplicates), expressed in the robot frame."""
+
+    with_normals: bool = False
+
+    def __init__(self, robot: Robot, n_points: int = 64, spacing: float = 0.015) -> None:
+        super().__init__(robot)
+        if n_points < 1:
+            raise ValueError("n_points must be at least 1")
+        self.n_points = int(n_points)
+        self.spacing = float(spacing)
+        self._pts: list[Array] = []
+        self._nrm: list[Array] = []
+        self._stacked: tuple[Array, Array, NDArray[np.int64]] | None = None
+
+    @abstractmethod
+    def points_of(self, scene: Scene) -> tuple[Array, Array]:
+        """World points ``(P, d)`` and normals ``(P, d)`` for a scene."""
+
+    def set_scene(self, i: int, scene: Scene) -> None:
+        super().set_scene(i, scene)
+        cache = scene.__dict__.setdefault("_observer_cache", {})
+        key = (type(self).__name__, self.spacing)
+        if key not in cache:
+            cache[key] = self.points_of(scene)
+        p, n = cache[key]
+        self._stacked = None
+        if i == len(self._pts):
+            self._pts.append(p)
+            self._nrm.append(n)
+        else:
+            self._pts[i], self._nrm[i] = p, n
+
+    @property
+    def features(self) -> int:
+        return self.robot.dim * (2 if self.with_normals else 1)
+
+    @property
+    def space(self) -> spaces.Box:
+        return spaces.Box(-np.inf, np.inf, shape=(self.n_points, self.features), dtype=np.float32)
+
+    def select(self, rng: np.random.Generator) -> tuple[Array, Array]:
+        """World points and normals ``(E, N, d)``: a random subset of each scene's set."""
+        e, n, d = len(self._pts), self.n_points, self.robot.dim
+        if self._stacked is None:
+            counts = np.array([len(p) for p in self._pts], dtype=np.int64)
+            pmax = max(int(counts.max()) if e else 1, 1)
+            sp = np.zeros((e, pmax, d))
+            sn = np.zeros((e, pmax, d))
+            for i in range(e):  # once per scene change, not per step
+                sp[i, : counts[i]] = self._pts[i]
+                sn[i, : counts[i]] = self._nrm[i]
+            self._stacked = (sp, sn, counts)
+        sp, sn, counts = self._stacked
+        # random keys, invalid slots sorted last: the first N are a subset without replacement
+        pmax = sp.shape[1]
+        keys = rng.random((e, pmax))
+        keys[np.arange(pmax)[None, :] >= counts[:, None]] = np.inf
+        idx = np.argsort(keys, axis=1)[:, :n]
+        if idx.shape[1] < n:
+            idx = np.concatenate([idx, np.zeros((e, n - idx.shape[1]), dtype=idx.dtype)], 1)
+        # pad scenes with fewer than N points by duplicating random points of their own
+        short = np.arange(n)[None, :] >= counts[:, None]
+        dup = (rng.random((e, n)) * np.maximum(counts, 1)[:, None]).astype(np.int64)
+        idx = np.where(short, dup, idx)
+        return (
+            np.take_along_axis(sp, idx[..., None], axis=1),
+            np.take_along_axis(sn, idx[..., None], axis=1),
+        )
+
+    def observe(self, q: Array, rng: np.random.Generator) -> NDArray[np.float32]:
+        pw, nw = self.select(rng)
+        p, n = self.robot.to_body_frame(q, pw, nw)
+        if self.with_normals:
+            assert n is not None
+            return np.concatenate([p, n], -1).astype(np.float32)
+        return p.astype(np.float32)

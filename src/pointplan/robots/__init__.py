@@ -1,0 +1,18 @@
+"""Robots: body geometry and configuration space."""
+
+from .base import BodyParts, Robot
+from .point import Disc2D, Sphere3D
+from .sshape import SShape
+
+ROBOTS: dict[str, type[Robot]] = {"disc2d": Disc2D, "sphere3d": Sphere3D, "sshape": SShape}
+
+
+def make_robot(name: str) -> Robot:
+    """A robot by name (``disc2d``, ``sphere3d``, ``sshape``)."""
+    try:
+        return ROBOTS[name]()
+    except KeyError:
+        raise ValueError(f"unknown robot {name!r}; known: {', '.join(ROBOTS)}") from None
+
+
+__all__ = ["BodyParts", "Robot", "Disc2D", "Sphere3D", "SShape", "ROBOTS", "make_robot"]

@@ -1,0 +1,174 @@
+"""Rigid robots: body geometry plus configuration-space operations.
+
+Configurations are float arrays with any leading batch shape. A configuration is the pose
+of the body frame in the world: ``(x, y)`` for the disc, ``(x, y, z)`` for the sphere and
+``(x, y, z, qx, qy, qz, qw)`` for free-flying bodies. Motions are *body twists*: the robot
+moves from ``q`` to ``q * exp(v)``. The distance between two configurations is the norm of
+the twist that joins them, ``||log(q0^-1 q1)||`` (metres and radians weighted one to one),
+and every part of the package (env, planners, evaluator) uses this one distance.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geometry.collision import CollisionWorld
+
+Array = NDArray[np.float64]
+Bool = NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class BodyParts:
+    """Body geometry in the body frame: spheres and oriented boxes (half sides)."""
+
+    sphere_centers: Array  # (Ps, d)
+    sphere_radii: Array  # (Ps,)
+    box_centers: Array  # (Pb, d)
+    box_rotations: Array  # (Pb, d, d)
+    box_halfs: Array  # (Pb, d)
+
+
+class Robot(ABC):
+    """A rigid body that moves by body twists. Subclasses fill in the group operations."""
+
+    #: short name used in files and on the command line
+    name: str
+    #: workspace dimension (2 or 3)
+    dim: int
+    #: length of a configuration vector
+    config_dim: int
+    #: length of a twist (= the action dimension)
+    twist_dim: int
+    #: action scale per twist axis: action in [-1, 1]^k times this is the twist
+    action_scale: Array
+    #: body geometry
+    parts: BodyParts
+
+    # -------------------------------------------------------------- group operations
+    @abstractmethod
+    def integrate(self, q: Array, v: Array) -> Array:
+        """``q * exp(v)`` for body twists ``v: (..., twist_dim)``."""
+
+    @abstractmethod
+    def log(self, q0: Array, q1: Array) -> Array:
+        """The body twist ``v`` with ``q0 * exp(v) = q1``."""
+
+    @abstractmethod
+    def rotations(self, q: Array) -> Array:
+        """Body-to-world rotations ``(..., d, d)``."""
+
+    def positions(self, q: Array) -> Array:
+        """Positions of the body frame ``(..., d)``."""
+        return np.asarray(q, np.float64)[..., : self.dim]
+
+    @abstractmethod
+    def sample_orientation(self, rng: np.random.Generator, n: int) -> Array:
+        """``(n, config_dim - dim)`` orientation coordinates drawn uniformly."""
+
+    # -------------------------------------------------------------- derived operations
+    def distance(self, q0: Array, q1: Array) -> Array:
+        """Geodesic distance ``||log(q0^-1 q1)||``."""
+        return np.linalg.norm(self.log(q0, q1), axis=-1)
+
+    def interpolate(self, q0: Array, q1: Array, s: Array | float) -> Array:
+        """Points ``q0 * exp(s log(q0^-1 q1))`` on the geodesic; ``s`` broadcasts."""
+        v = self.log(q0, q1)
+        s = np.asarray(s, np.float64)
+        return self.integrate(q0, v * s[..., None])
+
+    def goal_vector(self, q: Array, goal: Array) -> Array:
+        """The goal as seen from the robot: ``log(q^-1 goal)`` (body frame)."""
+        return self.log(q, goal)
+
+    def clip(self, q: Array, low: Array, high: Array) -> Array:
+        """Clip positions to the workspace bounds; orientation is free."""
+        out = np.array(q, dtype=np.float64, copy=True)
+        out[..., : self.dim] = np.clip(out[..., : self.dim], low, high)
+        return out
+
+    def sample_uniform(self, rng: np.random.Generator, n: int, low: Array, high: Array) -> Array:
+        """``n`` configurations uniform in the bounds (collisions not checked)."""
+        pos = rng.uniform(low, high, size=(n, self.dim))
+        if self.config_dim == self.dim:
+            return pos
+        return np.concatenate([pos, self.sample_orientation(rng, n)], -1)
+
+    def sample_free(
+        self,
+        world: CollisionWorld,
+        rng: np.random.Generator,
+        n: int,
+        low: Array,
+        high: Array,
+        max_tries: int = 1000,
+    ) -> Array:
+        """``n`` collision-free configurations, drawn uniformly by rejection."""
+        out = np.zeros((0, self.config_dim))
+        for _ in range(max_tries):
+            cand = self.sample_uniform(rng, max(2 * (n - len(out)), 16), low, high)
+            free = cand[~self.collides(world, cand)]
+            out = np.concatenate([out, free])[:n]
+            if len(out) == n:
+                return out
+        raise RuntimeError("could not sample free configurations: is the workspace full?")
+
+    def to_body_frame(self, q: Array, points: Array, normals: Array | None = None) -> tuple[Array, Array | None]:
+        """Express world points ``(..., N, d)`` (and normals) in the frame of ``q: (..., cdim)``."""
+        rot = self.rotations(q)
+        p = np.einsum("...ji,...nj->...ni", rot, points - self.positions(q)[..., None, :])
+        n = None if normals is None else np.einsum("...ji,...nj->...ni", rot, normals)
+        return p, n
+
+    # -------------------------------------------------------------- collision
+    def world_parts(self, q: Array) -> tuple[Array, Array, Array, Array]:
+        """World poses of the body parts: sphere centres ``(..., Ps, d)``, box centres
+        ``(..., Pb, d)``, box rotations ``(..., Pb, d, d)``, box half sides ``(..., Pb, d)``."""
+        rot = self.rotations(q)
+        pos = self.positions(q)
+        sc = np.einsum("...ij,pj->...pi", rot, self.parts.sphere_centers) + pos[..., None, :]
+        bc = np.einsum("...ij,pj->...pi", rot, self.parts.box_centers) + pos[..., None, :]
+        br = np.einsum("...ij,pjk->...pik", rot, self.parts.box_rotations)
+        bh = np.broadcast_to(self.parts.box_halfs, bc.shape)
+        return sc, bc, br, bh
+
+    def collides(self, world: CollisionWorld, q: Array) -> Bool:
+        """Collision of configurations ``q: (*world.batch_shape, M, config_dim)`` or, for a
+        single-scene world, any ``(..., config_dim)``. Returns the batch of booleans."""
+        q = np.asarray(q, np.float64)
+        lead = q.shape[:-1]
+        if world.batch_shape == ():
+            q = q.reshape(-1, self.config_dim)
+        sc, bc, br, bh = self.world_parts(q)
+        shape = q.shape[:-1]
+        hit = np.zeros(shape, dtype=bool)
+        ps, pb = sc.shape[-2], bc.shape[-2]
+        if ps:
+            flat = sc.reshape(shape[:-1] + (shape[-1] * ps, self.dim))
+            rad = np.broadcast_to(self.parts.sphere_radii, shape + (ps,)).reshape(flat.shape[:-1])
+            hit |= world.spheres_collide(flat, rad).reshape(shape + (ps,)).any(-1)
+        if pb:
+            d = self.dim
+            hit |= (
+                world.boxes_collide(
+                    bc.reshape(shape[:-1] + (shape[-1] * pb, d)),
+                    br.reshape(shape[:-1] + (shape[-1] * pb, d, d)),
+                    bh.reshape(shape[:-1] + (shape[-1] * pb, d)),
+                )
+                .reshape(shape + (pb,))
+                .any(-1)
+            )
+        return hit.reshape(lead) if world.batch_shape == () else hit
+
+    def segment_configs(self, q0: Array, q1: Array, resolution: float) -> Array:
+        """Configurations along the geodesic ``q0 -> q1`` every ``resolution`` at most,
+        both ends included: ``(K, config_dim)``."""
+        n = max(1, int(np.ceil(float(self.distance(q0, q1)) / resolution)))
+        return self.interpolate(np.asarray(q0)[None], np.asarray(q1)[None], np.linspace(0.0, 1.0, n + 1))
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"

@@ -1,0 +1,93 @@
+"""Scenarios: a robot, a family of workspaces, and how problems are drawn in them.
+
+An environment id names a scenario; the environment asks it for workspaces of the train or
+test split and for start/goal pairs.
+"""
+
+from __future__ import annotations
+
+import zlib
+from abc import ABC, abstractmethod
+from typing import Sequence
+
+import numpy as np
+
+from ..robots import Disc2D
+from ..robots.base import Robot
+from . import narrow2d
+from .scene import Problem, Scene
+
+
+class Scenario(ABC):
+    """A family of planning problems for one robot."""
+
+    name: str
+    robot: Robot
+    horizon: int
+
+    @abstractmethod
+    def scene(self, split: str, index: int) -> Scene:
+        """Workspace ``index`` of ``split`` (``train`` or ``test``); splits are disjoint."""
+
+    def sample_problem(self, scene: Scene, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """A collision-free start and goal drawn uniformly in ``scene``."""
+        q = self.robot.sample_free(scene.world, rng, 2, scene.low, scene.high)
+        return q[0], q[1]
+
+    def problems(self, split: str, n: int, seed: int = 0) -> list[Problem]:
+        """``n`` fixed problems, one per workspace ``0..n-1`` of ``split``."""
+        out = []
+        for i in range(n):
+            scene = self.scene(split, i)
+            rng = np.random.default_rng(np.random.SeedSequence([zlib.crc32(split.encode()), i, seed]))
+            start, goal = self.sample_problem(scene, rng)
+            out.append(Problem(scene, start, goal, tag=f"{self.name}/{split}/{i}/seed{seed}"))
+        return out
+
+
+class Narrow2DScenario(Scenario):
+    """2D-Narrow with the 2D disc; horizon 50."""
+
+    name = "narrow2d"
+    horizon = 50
+
+    def __init__(self, robot: Robot | None = None, config: narrow2d.Narrow2DConfig | None = None) -> None:
+        self.robot = robot or Disc2D()
+        self.config = config or narrow2d.Narrow2DConfig()
+
+    def scene(self, split: str, index: int) -> Scene:
+        return narrow2d.workspace(split, index, self.config, radius=float(self.robot.parts.sphere_radii.max()))
+
+    def problems(self, split: str, n: int, seed: int = 0) -> list[Problem]:
+        return narrow2d.problems(split, n, seed, self.robot)
+
+
+class FixedScenario(Scenario):
+    """One scene (e.g. loaded from a file) for every split, with optional fixed problems."""
+
+    def __init__(self, scene: Scene, robot: Robot, horizon: int = 50, fixed: Sequence[Problem] = ()) -> None:
+        self.name = scene.name or "scene"
+        self._scene = scene
+        self.robot = robot
+        self.horizon = horizon
+        self.fixed = list(fixed)
+
+    def scene(self, split: str, index: int) -> Scene:
+        return self._scene
+
+    def problems(self, split: str, n: int, seed: int = 0) -> list[Problem]:
+        if self.fixed:
+            return self.fixed[:n]
+        return super().problems(split, n, seed)
+
+
+SCENARIOS: dict[str, type[Scenario]] = {"narrow2d": Narrow2DScenario}
+
+
+def make_scenario(name: str) -> Scenario:
+    """A scenario by name (``narrow2d``)."""
+    key = name.lower().replace("-", "").replace("_", "")
+    try:
+        return SCENARIOS[key]()
+    except KeyError:
+        raise ValueError(f"unknown environment {name!r}; known: {', '.join(SCENARIOS)}") from None
