@@ -30,7 +30,7 @@ class EnvConfig:
     observation: str = "surface-normals"
     #: number of observed points (point observers)
     n_points: int = 64
-    #: ``train`` or ``test`` workspaces
+    #: ``train``, ``val`` (held out for model selection) or ``test`` workspaces
     split: str = "train"
     #: episode length; ``None`` takes the scenario's (50 for 2D-Narrow)
     horizon: int | None = None
@@ -84,8 +84,8 @@ class BatchedCore:
     """``E`` planning environments of one scenario stepping in lockstep."""
 
     def __init__(self, scenario: Scenario, num_envs: int, config: EnvConfig) -> None:
-        if config.split not in ("train", "test"):
-            raise ValueError(f"split must be 'train' or 'test', not {config.split!r}")
+        if config.split not in ("train", "val", "test"):
+            raise ValueError(f"split must be 'train', 'val' or 'test', not {config.split!r}")
         self.scenario = scenario
         self.robot: Robot = scenario.robot
         self.config = config

@@ -48,6 +48,8 @@ class _Ball(Robot):
 
     def collides(self, world, q):  # type: ignore[no-untyped-def]
         q = np.asarray(q, np.float64)
+        if world.batch_shape == ():  # any leading shape, as in Robot.collides
+            return world.spheres_collide(q.reshape(-1, self.dim), self.radius).reshape(q.shape[:-1])
         return world.spheres_collide(q, self.radius)
 
     def __repr__(self) -> str:

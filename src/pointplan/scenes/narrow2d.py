@@ -6,7 +6,7 @@ above or below the horizontal wall. That is five boxes. The cross splits the squ
 four rooms and the three gaps join all four, so every pair of free configurations is
 connected; the generator checks this on a grid all the same and re-draws otherwise.
 
-Train and test workspaces come from disjoint seed streams: workspace ``i`` of split ``s``
+Train, validation and test workspaces come from disjoint seed streams: workspace ``i`` of split ``s``
 is drawn from ``SeedSequence([SPLIT_KEYS[s], i])``.
 """
 
@@ -21,7 +21,7 @@ from ..geometry.shapes import Box
 from ..robots.base import Robot
 from .scene import Problem, Scene
 
-SPLIT_KEYS = {"train": 0x7A11, "test": 0x7E57}
+SPLIT_KEYS = {"train": 0x7A11, "val": 0x7A1D, "test": 0x7E57}
 
 
 @dataclass(frozen=True)
@@ -78,16 +78,25 @@ def generate_scene(rng: np.random.Generator, config: Narrow2DConfig = Narrow2DCo
 def free_space_labels(scene: Scene, radius: float, resolution: int = 200) -> tuple[np.ndarray, int]:
     """Connected components of the free space of a disc on a grid (cell centres)."""
     xs = (np.arange(resolution) + 0.5) / resolution
-    grid = np.stack(np.meshgrid(xs, xs, indexing="ij"), -1).reshape(-1, 2)
-    free = ~scene.world.spheres_collide(grid, radius)
-    labels, n = ndimage.label(free.reshape(resolution, resolution))
+    boxes = [b for b in scene.obstacles if isinstance(b, Box)]
+    if len(boxes) == len(scene.obstacles) and all(np.allclose(b.rotation, np.eye(2)) for b in boxes):
+        # axis-aligned boxes: per-axis distances, combined by broadcasting (fast)
+        occupied = np.zeros((resolution, resolution), dtype=bool)
+        for b in boxes:
+            dx = np.maximum(np.abs(xs - b.center[0]) - b.half[0], 0.0)
+            dy = np.maximum(np.abs(xs - b.center[1]) - b.half[1], 0.0)
+            occupied |= dx[:, None] ** 2 + dy[None, :] ** 2 <= radius * radius
+    else:
+        grid = np.stack(np.meshgrid(xs, xs, indexing="ij"), -1).reshape(-1, 2)
+        occupied = scene.world.spheres_collide(grid, radius).reshape(resolution, resolution)
+    labels, n = ndimage.label(~occupied)
     return labels, int(n)
 
 
 def workspace_rng(split: str, index: int) -> np.random.Generator:
     """The generator of workspace ``index`` of a split (``train`` or ``test``)."""
     if split not in SPLIT_KEYS:
-        raise ValueError(f"unknown split {split!r}; use 'train' or 'test'")
+        raise ValueError(f"unknown split {split!r}; use 'train', 'val' or 'test'")
     return np.random.default_rng(np.random.SeedSequence([SPLIT_KEYS[split], int(index)]))
 
 
@@ -108,15 +117,18 @@ def sample_problem(scene: Scene, robot: Robot, rng: np.random.Generator) -> tupl
     return q[0], q[1]
 
 
-def problems(split: str, n: int, seed: int = 0, robot: Robot | None = None) -> list[Problem]:
-    """``n`` problems of a split, one per workspace; fixed by ``seed``."""
+def problem(split: str, index: int, seed: int = 0, robot: Robot | None = None) -> Problem:
+    """Problem ``index`` of a split: workspace ``index`` with a start and goal drawn from
+    ``(split, index, seed)``."""
     from ..robots import Disc2D
 
     robot = robot or Disc2D()
-    out = []
-    for i in range(n):
-        scene = workspace(split, i)
-        rng = np.random.default_rng(np.random.SeedSequence([SPLIT_KEYS[split], i, seed, 1]))
-        start, goal = sample_problem(scene, robot, rng)
-        out.append(Problem(scene=scene, start=start, goal=goal, tag=f"narrow2d/{split}/{i}/seed{seed}"))
-    return out
+    scene = workspace(split, index, radius=float(robot.parts.sphere_radii.max()))
+    rng = np.random.default_rng(np.random.SeedSequence([SPLIT_KEYS[split], int(index), int(seed), 1]))
+    start, goal = sample_problem(scene, robot, rng)
+    return Problem(scene=scene, start=start, goal=goal, tag=f"narrow2d/{split}/{index}/seed{seed}")
+
+
+def problems(split: str, n: int, seed: int = 0, robot: Robot | None = None) -> list[Problem]:
+    """``n`` problems of a split, one per workspace ``0..n-1``; fixed by ``seed``."""
+    return [problem(split, i, seed, robot) for i in range(n)]

@@ -34,15 +34,17 @@ class Scenario(ABC):
         q = self.robot.sample_free(scene.world, rng, 2, scene.low, scene.high)
         return q[0], q[1]
 
+    def problem(self, split: str, index: int, seed: int = 0) -> Problem:
+        """Problem ``index`` of ``split``: workspace ``index``, start and goal drawn from
+        ``(split, index, seed)``."""
+        scene = self.scene(split, index)
+        rng = np.random.default_rng(np.random.SeedSequence([zlib.crc32(split.encode()), index, seed]))
+        start, goal = self.sample_problem(scene, rng)
+        return Problem(scene, start, goal, tag=f"{self.name}/{split}/{index}/seed{seed}")
+
     def problems(self, split: str, n: int, seed: int = 0) -> list[Problem]:
         """``n`` fixed problems, one per workspace ``0..n-1`` of ``split``."""
-        out = []
-        for i in range(n):
-            scene = self.scene(split, i)
-            rng = np.random.default_rng(np.random.SeedSequence([zlib.crc32(split.encode()), i, seed]))
-            start, goal = self.sample_problem(scene, rng)
-            out.append(Problem(scene, start, goal, tag=f"{self.name}/{split}/{i}/seed{seed}"))
-        return out
+        return [self.problem(split, i, seed) for i in range(n)]
 
 
 class Narrow2DScenario(Scenario):
@@ -58,8 +60,8 @@ class Narrow2DScenario(Scenario):
     def scene(self, split: str, index: int) -> Scene:
         return narrow2d.workspace(split, index, self.config, radius=float(self.robot.parts.sphere_radii.max()))
 
-    def problems(self, split: str, n: int, seed: int = 0) -> list[Problem]:
-        return narrow2d.problems(split, n, seed, self.robot)
+    def problem(self, split: str, index: int, seed: int = 0) -> Problem:
+        return narrow2d.problem(split, index, seed, self.robot)
 
 
 class FixedScenario(Scenario):
@@ -74,6 +76,11 @@ class FixedScenario(Scenario):
 
     def scene(self, split: str, index: int) -> Scene:
         return self._scene
+
+    def problem(self, split: str, index: int, seed: int = 0) -> Problem:
+        if self.fixed:
+            return self.fixed[index % len(self.fixed)]
+        return super().problem(split, index, seed)
 
     def problems(self, split: str, n: int, seed: int = 0) -> list[Problem]:
         if self.fixed:

@@ -1,0 +1,5 @@
+"""``python -m pointplan``."""
+
+from .cli import main
+
+raise SystemExit(main())

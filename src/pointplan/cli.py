@@ -1,0 +1,207 @@
+"""The ``pointplan`` command."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+
+class CLIError(Exception):
+    """A user-facing error: printed without a traceback."""
+
+
+# ---------------------------------------------------------------------------- helpers
+def _scenario(args: argparse.Namespace) -> Any:
+    from .robots import make_robot
+    from .scenes.scenarios import FixedScenario, make_scenario
+
+    if getattr(args, "scene", None):
+        from .scenes.io import load_scene
+
+        sf = load_scene(args.scene)
+        robot_name = getattr(args, "robot", None) or sf.robot or ("disc2d" if sf.scene.dim == 2 else "sphere3d")
+        robot = make_robot(robot_name)
+        if robot.dim != sf.scene.dim:
+            raise CLIError(f"robot {robot_name} is {robot.dim}D but the scene is {sf.scene.dim}D")
+        return FixedScenario(sf.scene, robot, fixed=sf.problems)
+    try:
+        return make_scenario(args.env)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+
+
+def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
+    from .planners import make_planner
+
+    kwargs: dict[str, Any] = {}
+    if name == "birrt":
+        kwargs = {"max_nodes": args.max_nodes, "seed": seed}
+    try:
+        return make_planner(name, robot, **kwargs)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+
+
+def _write_json(path: str | None, payload: dict[str, Any]) -> None:
+    if path:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text(json.dumps(payload, indent=2) + "\n")
+        print(f"wrote {path}")
+
+
+def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> None:
+    p.add_argument("--env", default="narrow2d", help="scenario (default: narrow2d)")
+    p.add_argument("--scene", help="plan on a scene file (JSON, see docs/scenes.md) instead of --env")
+    p.add_argument("--robot", help="robot for a scene file that names none (disc2d, sphere3d, sshape)")
+    p.add_argument("--planner", default=planner_default, help="birrt or straight (default: %(default)s)")
+    p.add_argument("--max-nodes", type=int, default=20000, help="Bi-RRT node budget (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="problem-set seed (default: %(default)s)")
+
+
+# ---------------------------------------------------------------------------- commands
+def cmd_eval(args: argparse.Namespace) -> int:
+    from .evaluation import evaluate, format_table
+
+    scenario = _scenario(args)
+    problems = scenario.problems("test", args.episodes, seed=args.seed)
+    results: dict[str, dict[str, Any]] = {}
+    for name in args.planner.split(","):
+        planner = _planner(name.strip(), scenario.robot, args, args.seed)
+        report = evaluate(planner, problems, scenario.robot, progress=not args.quiet)
+        results[name.strip()] = report.metrics()
+    print(format_table(results))
+    payload: dict[str, Any] = dict(next(iter(results.values()))) if len(results) == 1 else {"planners": results}
+    payload.update({"env": scenario.name, "seed": args.seed})
+    _write_json(args.json, payload)
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from .viz.plot2d import render_problem
+
+    scenario = _scenario(args)
+    if scenario.robot.dim != 2:
+        raise CLIError("render draws 2D scenes for now")
+    problem = scenario.problem("test", args.seed, seed=0)
+    result = None
+    if args.planner != "none":
+        result = _planner(args.planner, scenario.robot, args, args.seed).plan(problem)
+        print(f"{args.planner}: success={result.success} nodes={result.nodes} checks={result.collision_checks}")
+    render_problem(problem, args.output, scenario.robot, observer_name=args.observation, n_points=args.n_points, result=result, seed=args.seed)
+    print(f"wrote {args.output}")
+    return 0
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    from .evaluation import check_path, evaluate, format_table
+
+    scenario = _scenario(args)
+    if getattr(scenario, "fixed", None):
+        problems = scenario.fixed
+    else:
+        problems = scenario.problems("test", args.episodes, seed=args.seed)
+    planner = _planner(args.planner, scenario.robot, args, args.seed)
+    report = evaluate(planner, problems, scenario.robot, progress=not args.quiet)
+    print(format_table({args.planner: report.metrics()}))
+    if args.output and scenario.robot.dim == 2:
+        from .viz.plot2d import render_problem
+
+        result = planner.plan(problems[0])
+        render_problem(problems[0], args.output, scenario.robot, result=result, seed=args.seed)
+        print(f"wrote {args.output}")
+    if args.json:
+        paths = []
+        for rec in report.records:
+            paths.append({"success": bool(rec.success), "path": np.asarray(rec.path).tolist()})
+        _write_json(args.json, {"metrics": report.metrics(), "problems": paths})
+    ok = all(check_path(scenario.robot, p, r.path) for p, r in zip(problems, report.records) if r.success)
+    return 0 if ok else 1
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from .evaluation import evaluate, format_table
+    from .planners import make_planner
+    from .scenes.scenarios import Narrow2DScenario
+    from .viz.plot2d import render_grid
+
+    scenario = Narrow2DScenario()
+    robot = scenario.robot
+    print(f"2D-Narrow: {args.episodes} test problems (unseen workspaces)")
+    problems = scenario.problems("test", args.episodes, seed=0)
+    planners = {"birrt": make_planner("birrt", robot, seed=0), "straight": make_planner("straight", robot)}
+    metrics, reports = {}, {}
+    for name, planner in planners.items():
+        reports[name] = evaluate(planner, problems, robot, progress=not args.quiet)
+        metrics[name] = reports[name].metrics()
+    print(format_table(metrics))
+    shown = problems[: args.figures]
+    results = [planners["birrt"].plan(p) for p in shown]
+    render_grid(shown, results, args.output, robot, titles=[f"{p.tag}  nodes={r.nodes}" for p, r in zip(shown, results)])
+    print(f"wrote {args.output}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+
+    parser = argparse.ArgumentParser(prog="pointplan", description="Neural motion planning from point clouds.")
+    parser.add_argument("--version", action="version", version=f"pointplan {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("eval", help="run planners on a seeded set of test problems")
+    _add_common(p)
+    p.add_argument("--episodes", type=int, default=400, help="number of test problems (default: %(default)s)")
+    p.add_argument("--json", help="write the metrics to this file")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser("render", help="draw a problem, its observation and a planner's path")
+    _add_common(p)
+    p.add_argument("--observation", default="surface-normals", help="surface, surface-normals, interior or image")
+    p.add_argument("--n-points", type=int, default=64)
+    p.add_argument("-o", "--output", default="render.png", help="PNG file (default: %(default)s)")
+    p.set_defaults(func=cmd_render)
+
+    p = sub.add_parser("plan", help="plan the problems of a scene file (or of --env)")
+    _add_common(p)
+    p.add_argument("--episodes", type=int, default=10, help="problems to draw when the scene file has none")
+    p.add_argument("-o", "--output", help="draw the first problem to this PNG")
+    p.add_argument("--json", help="write metrics and paths to this file")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_plan)
+
+    p = sub.add_parser("demo", help="plan 2D-Narrow test problems and draw a few")
+    p.add_argument("--episodes", type=int, default=100, help="test problems (default: %(default)s)")
+    p.add_argument("--figures", type=int, default=8, help="problems drawn (default: %(default)s)")
+    p.add_argument("-o", "--output", default="demo.png", help="figure (default: %(default)s)")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    t0 = time.perf_counter()
+    try:
+        code = int(args.func(args))
+    except CLIError as e:
+        print(f"pointplan: error: {e}", file=sys.stderr)
+        return 2
+    except (ValueError, FileNotFoundError) as e:
+        # scene-file and argument problems come with messages meant for the user
+        print(f"pointplan: error: {e}", file=sys.stderr)
+        return 2
+    if getattr(args, "quiet", False) is False:
+        print(f"({time.perf_counter() - t0:.1f} s)")
+    return code
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

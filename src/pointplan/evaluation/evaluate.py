@@ -1,0 +1,230 @@
+"""Run a planner on a set of problems and score it.
+
+Success is decided here by :func:`check_path`, an independent re-check of the returned
+path, not by what the planner says; the two are both recorded and disagreements counted.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..planners.base import intervals
+from ..robots.base import Robot
+from ..scenes.scene import Problem
+
+Array = NDArray[np.float64]
+
+_BOUNDS_EPS = 1e-9
+
+
+def check_path(robot: Robot, problem: Problem, path: Array, resolution: float = 0.01, tolerance: float = 0.07) -> bool:
+    """Is ``path`` a valid solution of ``problem``?
+
+    It must be a finite ``(K, config_dim)`` array with ``K >= 1`` that starts at the start
+    (geodesic distance below 1e-6) and ends within ``tolerance`` of the goal (strictly, as
+    in the environment), and every geodesic segment between consecutive configurations,
+    checked at configurations at most ``resolution`` apart (both ends included), must be
+    collision-free with every position inside the scene bounds.
+    """
+    path = np.asarray(path, np.float64)
+    if path.ndim != 2 or path.shape[0] < 1 or path.shape[1] != robot.config_dim:
+        return False
+    if not np.all(np.isfinite(path)):
+        return False
+    if float(robot.distance(path[0], problem.start)) >= 1e-6:
+        return False
+    if not float(robot.distance(path[-1], problem.goal)) < tolerance:
+        return False
+    qs = densify(robot, path, resolution)
+    scene = problem.scene
+    pos = robot.positions(qs)
+    if np.any(pos < scene.low - _BOUNDS_EPS) or np.any(pos > scene.high + _BOUNDS_EPS):
+        return False
+    return not bool(np.any(robot.collides(scene.world, qs)))
+
+
+def densify(robot: Robot, path: Array, resolution: float) -> Array:
+    """Configurations along every segment of ``path``, both ends of each segment included:
+    ``(N, config_dim)``. A segment of geodesic length ``l`` gets ``max(1, ceil(l / resolution
+    - 1e-9)) + 1`` evenly spaced configurations (the planners' grid; the slack keeps an edge
+    of exactly ``step`` from getting an extra interval through round-off). A
+    one-configuration path is returned as is."""
+    path = np.asarray(path, np.float64)
+    if len(path) < 2:
+        return path.copy()
+    q0, q1 = path[:-1], path[1:]
+    v = robot.log(q0, q1)
+    m = intervals(np.linalg.norm(v, axis=-1), resolution)  # intervals per segment
+    counts = m + 1
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    idx = np.repeat(np.arange(len(m)), counts)
+    s = (np.arange(offsets[-1]) - offsets[idx]) / m[idx]
+    return robot.integrate(q0[idx], v[idx] * s[:, None])
+
+
+def path_length(robot: Robot, path: Array) -> float:
+    """Sum of geodesic distances between consecutive configurations."""
+    path = np.asarray(path, np.float64)
+    if len(path) < 2:
+        return 0.0
+    return float(np.sum(robot.distance(path[:-1], path[1:])))
+
+
+@dataclass
+class EpisodeRecord:
+    """One problem of an evaluation."""
+
+    tag: str
+    #: decided by :func:`check_path`
+    success: bool
+    #: what the planner reported
+    claimed_success: bool
+    nodes: int
+    collision_checks: int
+    #: geodesic length of the path (NaN when the path failed the check)
+    path_length: float
+    #: wall time of ``planner.plan``, seconds (measured by the evaluator)
+    time_s: float
+    path: Array = field(repr=False)
+
+
+def _mean(xs: Sequence[float]) -> float:
+    return float(np.mean(xs)) if len(xs) else math.nan
+
+
+def _median(xs: Sequence[float]) -> float:
+    return float(np.median(xs)) if len(xs) else math.nan
+
+
+@dataclass
+class EvalReport:
+    """Per-problem records of one planner on a problem set."""
+
+    planner: str
+    records: list[EpisodeRecord] = field(default_factory=list)
+
+    def metrics(self) -> dict[str, Any]:
+        """Success rate; nodes, collision checks and time over *all* problems; path length
+        over the successful ones; and how often the planner's claim disagreed with the check."""
+        r = self.records
+        ok = [x for x in r if x.success]
+        nodes = [float(x.nodes) for x in r]
+        checks = [float(x.collision_checks) for x in r]
+        times = [x.time_s for x in r]
+        lengths = [x.path_length for x in ok]
+        return {
+            "success_rate": len(ok) / len(r) if r else math.nan,
+            "episodes": len(r),
+            "nodes_mean": _mean(nodes),
+            "nodes_median": _median(nodes),
+            "collision_checks_mean": _mean(checks),
+            "collision_checks_median": _median(checks),
+            "path_length_mean": _mean(lengths),
+            "path_length_median": _median(lengths),
+            "time_mean_s": _mean(times),
+            "time_median_s": _median(times),
+            "planner_claims_disagree": sum(1 for x in r if x.success != x.claimed_success),
+        }
+
+
+def evaluate(
+    planner: Any,
+    problems: Sequence[Problem],
+    robot: Robot,
+    progress: bool = True,
+    resolution: float = 0.01,
+    tolerance: float = 0.07,
+) -> EvalReport:
+    """Plan every problem with ``planner`` and re-check each returned path."""
+    report = EvalReport(planner=str(getattr(planner, "name", type(planner).__name__)))
+    it: Any = problems
+    if progress:
+        from tqdm.auto import tqdm
+
+        it = tqdm(problems, desc=report.planner, unit="problem")
+    n_ok = 0
+    for problem in it:
+        t0 = time.perf_counter()
+        result = planner.plan(problem)
+        elapsed = time.perf_counter() - t0
+        path = np.asarray(result.path, np.float64)
+        ok = len(path) > 0 and check_path(robot, problem, path, resolution, tolerance)
+        n_ok += ok
+        report.records.append(
+            EpisodeRecord(
+                tag=problem.tag,
+                success=bool(ok),
+                claimed_success=bool(result.success),
+                nodes=int(result.nodes),
+                collision_checks=int(result.collision_checks),
+                path_length=path_length(robot, path) if ok else math.nan,
+                time_s=elapsed,
+                path=path,
+            )
+        )
+        if progress:
+            it.set_postfix(success=f"{n_ok / len(report.records):.1%}")
+    return report
+
+
+_ROWS = [
+    ("success_rate", "success"),
+    ("episodes", "episodes"),
+    ("nodes_mean", "nodes (mean)"),
+    ("nodes_median", "nodes (median)"),
+    ("collision_checks_mean", "collision checks (mean)"),
+    ("collision_checks_median", "collision checks (median)"),
+    ("path_length_mean", "path length (mean)"),
+    ("path_length_median", "path length (median)"),
+    ("time_mean_s", "time s (mean)"),
+    ("time_median_s", "time s (median)"),
+    ("planner_claims_disagree", "claims disagree"),
+]
+
+
+def _fmt(key: str, v: Any) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, (bool, np.bool_)):
+        return str(bool(v))
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        if math.isnan(v):
+            return "-"
+        if key == "success_rate":
+            return f"{100 * v:.1f}%"
+        if key.startswith("time"):
+            return f"{v:.4f}"
+        if key.startswith("path_length"):
+            return f"{v:.3f}"
+        return f"{v:.1f}"
+    return str(v)
+
+
+def format_table(metrics_by_name: dict[str, dict[str, Any]]) -> str:
+    """An aligned text table: one row per metric, one column per planner. Metrics not in
+    the standard set are appended as extra rows."""
+    names = list(metrics_by_name)
+    keys = [(k, label) for k, label in _ROWS if any(k in m for m in metrics_by_name.values())]
+    known = {k for k, _ in _ROWS}
+    for m in metrics_by_name.values():
+        for k in m:
+            if k not in known and k not in [x for x, _ in keys]:
+                keys.append((k, k))
+    header = ["metric"] + names
+    rows = [[label] + [_fmt(k, metrics_by_name[n].get(k)) for n in names] for k, label in keys]
+    widths = [max(len(r[i]) for r in [header] + rows) for i in range(len(header))]
+
+    def line(cells: list[str]) -> str:
+        return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+
+    out = [line(header), "  ".join("-" * w for w in widths)]
+    out += [line(r) for r in rows]
+    return "\n".join(out)

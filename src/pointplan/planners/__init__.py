@@ -1,0 +1,40 @@
+"""Planners: Bi-RRT (RRT-Connect), the straight line, and a registry to build them by name."""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+from ..robots.base import Robot
+from .base import PlanResult, Planner, march, path_length
+from .birrt import BiRRT
+from .straight import StraightLine
+
+#: name -> factory ``(robot, **kw) -> Planner``; add planners with :func:`register_planner`
+PLANNERS: dict[str, Callable[..., Planner]] = {"birrt": BiRRT, "straight": StraightLine}
+
+
+def register_planner(name: str, factory: Callable[..., Planner]) -> None:
+    """Make ``factory(robot, **kw)`` available to :func:`make_planner` as ``name``."""
+    PLANNERS[name.lower()] = factory
+
+
+def make_planner(name: str, robot: Robot, **kw: Any) -> Planner:
+    """A planner by name (``birrt``, ``straight``, or any registered one)."""
+    try:
+        factory = PLANNERS[name.lower()]
+    except KeyError:
+        raise ValueError(f"unknown planner {name!r}; known: {', '.join(sorted(PLANNERS))}") from None
+    return factory(robot, **kw)
+
+
+__all__ = [
+    "PlanResult",
+    "Planner",
+    "BiRRT",
+    "StraightLine",
+    "PLANNERS",
+    "register_planner",
+    "make_planner",
+    "march",
+    "path_length",
+]

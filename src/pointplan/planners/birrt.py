@@ -1,0 +1,228 @@
+"""Bi-directional RRT: RRT-Connect (Kuffner & LaValle 2000) with path shortcutting.
+
+Two trees grow from the start and the goal. Each iteration one tree *extends* one step
+toward a uniform sample; the other tree then *connects*: it marches step by step toward the
+new node until it reaches it (a path) or is blocked. The trees swap roles every iteration.
+
+Every edge is at most ``step`` long in the robot's geodesic distance and is checked at
+configurations at most ``resolution`` apart, both ends included. A connect checks all its
+steps in one collision call. The solution is then shortcut: two points drawn uniformly by
+arc length along the path are joined by a geodesic when that is free and shorter.
+
+Only the :class:`~pointplan.robots.base.Robot` API is used, so any robot works.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..robots.base import Robot
+from ..scenes.scene import Problem
+from .base import Array, PlanResult, check_free, edge_configs, march
+
+_SAMPLE_BLOCK = 256
+
+
+class _Tree:
+    """Nodes and parents in arrays that double when full."""
+
+    def __init__(self, root: Array, capacity: int = 256) -> None:
+        self.nodes = np.empty((capacity, root.shape[0]))
+        self.parent = np.empty(capacity, dtype=np.int64)
+        self.nodes[0] = root
+        self.parent[0] = -1
+        self.n = 1
+
+    def add(self, configs: Array, first_parent: int) -> int:
+        """Append a chain ``first_parent -> configs[0] -> configs[1] -> ...``; returns the
+        index of the last added node."""
+        k = len(configs)
+        if self.n + k > len(self.nodes):
+            cap = max(2 * len(self.nodes), self.n + k)
+            nodes = np.empty((cap, self.nodes.shape[1]))
+            nodes[: self.n] = self.nodes[: self.n]
+            parent = np.empty(cap, dtype=np.int64)
+            parent[: self.n] = self.parent[: self.n]
+            self.nodes, self.parent = nodes, parent
+        self.nodes[self.n : self.n + k] = configs
+        self.parent[self.n] = first_parent
+        self.parent[self.n + 1 : self.n + k] = np.arange(self.n, self.n + k - 1)
+        self.n += k
+        return self.n - 1
+
+    def nearest(self, robot: Robot, q: Array) -> tuple[int, Array]:
+        """Index of the node nearest to ``q`` and the twist from it to ``q``."""
+        v = robot.log(self.nodes[: self.n], q[None])
+        i = int(np.argmin(np.einsum("ij,ij->i", v, v)))
+        return i, v[i]
+
+    def branch(self, i: int) -> Array:
+        """Configurations from the root to node ``i``."""
+        idx = []
+        while i >= 0:
+            idx.append(i)
+            i = int(self.parent[i])
+        return self.nodes[idx[::-1]]
+
+    def export(self) -> tuple[Array, NDArray[np.int64]]:
+        return self.nodes[: self.n].copy(), self.parent[: self.n].copy()
+
+
+class BiRRT:
+    """RRT-Connect with shortcutting.
+
+    ``max_nodes`` bounds the nodes of both trees together (the roots included); reaching it
+    is a failure. ``goal_bias`` is the probability of steering the extending tree toward
+    the other tree's root instead of a uniform sample (0 is plain RRT-Connect). Each
+    ``plan`` call draws from ``default_rng((seed, call number))``: a fresh planner gives
+    the same results on the same sequence of problems.
+    """
+
+    name = "birrt"
+
+    def __init__(
+        self,
+        robot: Robot,
+        max_nodes: int = 10000,
+        step: float = 0.07,
+        resolution: float = 0.01,
+        shortcut_iters: int = 100,
+        goal_bias: float = 0.0,
+        seed: int = 0,
+    ) -> None:
+        if step <= 0 or resolution <= 0:
+            raise ValueError("step and resolution must be positive")
+        if not 0.0 <= goal_bias <= 1.0:
+            raise ValueError("goal_bias is a probability")
+        self.robot = robot
+        self.max_nodes = int(max_nodes)
+        self.step = float(step)
+        self.resolution = float(resolution)
+        self.shortcut_iters = int(shortcut_iters)
+        self.goal_bias = float(goal_bias)
+        self.seed = int(seed)
+        self.calls = 0
+
+    def __repr__(self) -> str:
+        return (
+            f"BiRRT(max_nodes={self.max_nodes}, step={self.step}, resolution={self.resolution}, "
+            f"shortcut_iters={self.shortcut_iters}, goal_bias={self.goal_bias}, seed={self.seed})"
+        )
+
+    def reset(self, seed: int | None = None) -> None:
+        """Restart the call counter (and optionally change the seed)."""
+        if seed is not None:
+            self.seed = int(seed)
+        self.calls = 0
+
+    # ------------------------------------------------------------------ planning
+    def plan(self, problem: Problem) -> PlanResult:
+        t0 = time.perf_counter()
+        rng = np.random.default_rng([self.seed, self.calls])
+        self.calls += 1
+        robot, scene = self.robot, problem.scene
+        world, low, high = scene.world, scene.low, scene.high
+        start, goal = problem.start, problem.goal
+        cdim = robot.config_dim
+
+        ends_free = check_free(robot, world, np.stack([start, goal]), low, high)
+        checks = 2
+        trees = [_Tree(start), _Tree(goal)]
+        if not ends_free.all():
+            return PlanResult.failure(cdim, 2, checks, time.perf_counter() - t0, trees=[t.export() for t in trees])
+
+        samples = np.empty((0, cdim))
+        coins = np.empty(0)
+        k = 0
+        a = 0  # index of the tree that extends this iteration
+        raw: Array | None = None
+        while trees[0].n + trees[1].n < self.max_nodes:
+            if k == len(samples):
+                samples = robot.sample_uniform(rng, _SAMPLE_BLOCK, low, high)
+                coins = rng.random(_SAMPLE_BLOCK)
+                k = 0
+            ta, tb = trees[a], trees[1 - a]
+            target = tb.nodes[0] if coins[k] < self.goal_bias else samples[k]
+            k += 1
+            # EXTEND ta one step toward the sample
+            near, v = ta.nearest(robot, target)
+            ext = march(robot, world, ta.nodes[near], target, self.step, self.resolution, 1, low, high, v)
+            checks += ext.checks
+            if len(ext.nodes):
+                new = ta.add(ext.nodes, near)
+                q_new = ta.nodes[new]
+                # CONNECT tb toward the new node, as far as it goes
+                budget = self.max_nodes - trees[0].n - trees[1].n
+                near_b, v = tb.nearest(robot, q_new)
+                con = march(robot, world, tb.nodes[near_b], q_new, self.step, self.resolution, budget, low, high, v)
+                checks += con.checks
+                end_b = tb.add(con.nodes, near_b) if len(con.nodes) else near_b
+                if con.reached:
+                    # tb's last node is q_new itself: drop the duplicate
+                    path = np.concatenate([ta.branch(new), tb.branch(end_b)[::-1][1:]])
+                    raw = path if a == 0 else path[::-1]
+                    break
+            a = 1 - a
+
+        nodes = trees[0].n + trees[1].n
+        exported = [t.export() for t in trees]
+        if raw is None:
+            return PlanResult.failure(cdim, nodes, checks, time.perf_counter() - t0, trees=exported)
+        path, sc_checks = self.shortcut(raw, problem, rng)
+        return PlanResult(
+            path=path,
+            success=True,
+            nodes=nodes,
+            collision_checks=checks + sc_checks,
+            time_s=time.perf_counter() - t0,
+            trees=exported,
+            raw_path=raw,
+        )
+
+    # ------------------------------------------------------------------ smoothing
+    def shortcut(self, path: Array, problem: Problem, rng: np.random.Generator) -> tuple[Array, int]:
+        """``shortcut_iters`` random shortcuts between points anywhere on the path (by arc
+        length). A shortcut replaces a stretch when it is shorter and its geodesic, together
+        with the two partial segments that lead to it, is free and inside the bounds.
+        Returns the new path and the number of configurations checked."""
+        robot, scene = self.robot, problem.scene
+        path = np.asarray(path, np.float64)
+        checks = 0
+        twists = robot.log(path[:-1], path[1:])  # segment e is path[e] exp(s twists[e])
+        for _ in range(self.shortcut_iters):
+            if len(path) < 3:
+                break
+            seg = np.linalg.norm(twists, axis=-1)
+            cum = np.concatenate([[0.0], np.cumsum(seg)])
+            u, w = np.sort(rng.uniform(0.0, cum[-1], 2))
+            i = min(int(np.searchsorted(cum, u, side="right")) - 1, len(seg) - 1)
+            j = min(int(np.searchsorted(cum, w, side="right")) - 1, len(seg) - 1)
+            if i == j:
+                continue  # both on one segment: already a geodesic
+            fa = (u - cum[i]) / seg[i] if seg[i] > 0 else 0.0
+            fb = (w - cum[j]) / seg[j] if seg[j] > 0 else 1.0
+            qa, qb = robot.integrate(path[[i, j]], twists[[i, j]] * np.array([[fa], [fb]]))
+            if float(robot.distance(qa, qb)) >= w - u - 1e-12:
+                continue
+            # The new path's segments, checked on the evaluator's grid (the pieces of the
+            # old segments too: their grid differs from the old segment's).
+            verts = [path[i]]
+            if (u - cum[i]) > 1e-9:
+                verts.append(qa)
+            if (cum[j + 1] - w) > 1e-9:
+                verts.append(qb)
+            verts.append(path[j + 1])
+            va = np.stack(verts)
+            qs, _ = edge_configs(robot, va[:-1], va[1:], self.resolution)
+            checks += len(qs)
+            if not check_free(robot, scene.world, qs, scene.low, scene.high).all():
+                continue
+            path = np.concatenate([path[:i], va, path[j + 2 :]])
+            twists = np.concatenate([twists[:i], robot.log(va[:-1], va[1:]), twists[j + 1 :]])
+        return path, checks
+
+
+__all__ = ["BiRRT"]

@@ -1,0 +1,512 @@
+"""The scene file format: obstacles, bounds, an optional robot and planning problems in JSON.
+
+A scene file looks like this (2D; see ``docs/scenes.md`` for every field)::
+
+    {
+      "format": "pointplan-scene",
+      "version": 1,
+      "dim": 2,
+      "bounds": {"low": [0, 0], "high": [1, 1]},
+      "robot": "disc2d",
+      "obstacles": [
+        {"type": "box", "center": [0.5, 0.5], "size": [0.2, 0.1], "angle": 0.3},
+        {"type": "sphere", "center": [0.2, 0.8], "radius": 0.05}
+      ],
+      "problems": [{"start": [0.1, 0.1], "goal": [0.9, 0.9]}]
+    }
+
+Units are metres and radians. Boxes take *full* side lengths; rotations are an angle (2D)
+or a quaternion ``[x, y, z, w]`` (3D). Mesh and point-cloud obstacles point to files given
+relative to the JSON file.
+
+Every problem with the input raises :class:`SceneFormatError`, whose message names the
+file and the field, e.g. ``scene.json: obstacles[2].size: expected 3 positive numbers,
+got [1, -2]``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, NoReturn, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geometry import lie
+from ..geometry.shapes import Box, Capsule, Cylinder, Mesh, PointCloud, Shape, Sphere
+from .scene import Problem, Scene
+
+Array = NDArray[np.float64]
+
+FORMAT = "pointplan-scene"
+VERSION = 1
+
+#: robots a scene file may name: workspace dimension and configuration length
+ROBOT_DIMS: dict[str, tuple[int, int]] = {"disc2d": (2, 2), "sphere3d": (3, 3), "sshape": (3, 7)}
+
+OBSTACLE_TYPES = ("box", "sphere", "capsule", "cylinder", "mesh", "points")
+POINT_FILE_SUFFIXES = (".npy", ".xyz", ".txt", ".csv")
+
+_TOP_FIELDS = ("format", "version", "dim", "bounds", "robot", "obstacles", "problems", "name")
+_PROBLEM_FIELDS = ("start", "goal", "tag")
+
+
+class SceneFormatError(ValueError):
+    """A scene file that cannot be read. ``file`` and ``field`` (e.g. ``obstacles[2].size``)
+    say where; the message reads ``<file>: <field>: <what is wrong>``."""
+
+    def __init__(self, file: str, field: str, detail: str) -> None:
+        self.file = file
+        self.field = field
+        self.detail = detail
+        super().__init__(f"{file}: {field}: {detail}" if field else f"{file}: {detail}")
+
+
+@dataclass
+class SceneFile:
+    """The contents of a scene file."""
+
+    scene: Scene
+    problems: list[Problem] = field(default_factory=list)
+    #: robot name (``disc2d``, ``sphere3d``, ``sshape``) or ``None`` if the file names none
+    robot: str | None = None
+
+
+# ============================================================================ reading
+def _show(value: Any, limit: int = 60) -> str:
+    """A short JSON rendering of an offending value for error messages."""
+    try:
+        text = json.dumps(value, allow_nan=True)
+    except (TypeError, ValueError):
+        text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _kind(value: Any) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, (int, float)):
+        return "a number"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, dict):
+        return "an object"
+    return type(value).__name__
+
+
+def _is_number(x: Any) -> bool:
+    if not isinstance(x, (int, float)) or isinstance(x, bool):
+        return False
+    try:
+        return math.isfinite(x)
+    except OverflowError:  # an integer too large for a float
+        return False
+
+
+def _join(prefix: str, key: str | int) -> str:
+    if isinstance(key, int):
+        return f"{prefix}[{key}]"
+    return f"{prefix}.{key}" if prefix else key
+
+
+class _Reader:
+    """Validating reader of one parsed document; ``file`` is used in messages, ``base`` to
+    resolve mesh and point files."""
+
+    def __init__(self, file: str, base: Path) -> None:
+        self.file = file
+        self.base = base
+
+    def fail(self, where: str, detail: str) -> NoReturn:
+        raise SceneFormatError(self.file, where, detail)
+
+    # ------------------------------------------------------------------ primitives
+    def obj(self, value: Any, where: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            self.fail(where, f"expected an object, got {_kind(value)} {_show(value)}")
+        return value
+
+    def get(self, obj: dict[str, Any], key: str, where: str) -> Any:
+        if key not in obj:
+            self.fail(_join(where, key), "missing required field")
+        return obj[key]
+
+    def only(self, obj: dict[str, Any], allowed: Sequence[str], where: str, what: str) -> None:
+        for key in obj:
+            if key not in allowed:
+                self.fail(
+                    _join(where, key) if isinstance(key, str) else where,
+                    f"unknown field for {what} (allowed: {', '.join(allowed)})",
+                )
+
+    def number(self, value: Any, where: str, positive: bool = False) -> float:
+        ok = _is_number(value) and (not positive or value > 0)
+        if not ok:
+            want = "a positive number" if positive else "a finite number"
+            self.fail(where, f"expected {want}, got {_show(value)}")
+        return float(value)
+
+    def vector(self, value: Any, where: str, n: int, positive: bool = False, nonzero: bool = False) -> Array:
+        ok = (
+            isinstance(value, list)
+            and len(value) == n
+            and all(_is_number(x) for x in value)
+            and (not positive or all(x > 0 for x in value))
+        )
+        if not ok:
+            adj = "positive numbers" if positive else "numbers"
+            self.fail(where, f"expected {n} {adj}, got {_show(value)}")
+        v = np.array(value, dtype=np.float64)
+        if nonzero and not np.linalg.norm(v) > 0:
+            self.fail(where, f"expected {n} numbers, not all zero, got {_show(value)}")
+        return v
+
+    def quaternion(self, value: Any, where: str) -> Array:
+        """A rotation matrix from ``[x, y, z, w]`` (normalised here)."""
+        return lie.quat_to_matrix(self.vector(value, where, 4, nonzero=True))
+
+    def file_path(self, value: Any, where: str, suffixes: Sequence[str] | None = None) -> Path:
+        if not isinstance(value, str) or not value:
+            self.fail(where, f"expected a file name (a string), got {_show(value)}")
+        path = Path(value)
+        if not path.is_absolute():
+            path = self.base / path
+        if suffixes is not None and path.suffix.lower() not in suffixes:
+            self.fail(where, f"unsupported file type {path.suffix or '(none)'!r} of {value!r}; use one of {', '.join(suffixes)}")
+        if not path.is_file():
+            self.fail(where, f"file not found: {value!r} (looked for {os.path.abspath(path)})")
+        return path
+
+    # ------------------------------------------------------------------ document
+    def document(self, doc: Any) -> SceneFile:
+        doc = self.obj(doc, "(top level)")
+        fmt = self.get(doc, "format", "")
+        if fmt != FORMAT:
+            self.fail("format", f"expected {FORMAT!r}, got {_show(fmt)}: is this a pointplan scene file?")
+        version = self.get(doc, "version", "")
+        if not isinstance(version, int) or isinstance(version, bool):
+            self.fail("version", f"expected an integer, got {_show(version)}")
+        if version != VERSION:
+            self.fail("version", f"unsupported version {version}; this pointplan reads version {VERSION}")
+        self.only(doc, _TOP_FIELDS, "", "a scene file")
+        dim = self.get(doc, "dim", "")
+        if dim not in (2, 3) or isinstance(dim, bool) or not isinstance(dim, int):
+            self.fail("dim", f"expected 2 or 3, got {_show(dim)}")
+        bounds = self.obj(self.get(doc, "bounds", ""), "bounds")
+        self.only(bounds, ("low", "high"), "bounds", "bounds")
+        low = self.vector(self.get(bounds, "low", "bounds"), "bounds.low", dim)
+        high = self.vector(self.get(bounds, "high", "bounds"), "bounds.high", dim)
+        if np.any(high <= low):
+            self.fail("bounds.high", f"must exceed bounds.low in every axis, got low {_show(low.tolist())}, high {_show(high.tolist())}")
+
+        robot = doc.get("robot")
+        if robot is not None:
+            if not isinstance(robot, str) or robot not in ROBOT_DIMS:
+                self.fail("robot", f"unknown robot {_show(robot)}; known: {', '.join(ROBOT_DIMS)}")
+            if ROBOT_DIMS[robot][0] != dim:
+                self.fail("robot", f"{robot} is a {ROBOT_DIMS[robot][0]}D robot but the scene is {dim}D")
+
+        name = doc.get("name", "")
+        if not isinstance(name, str):
+            self.fail("name", f"expected a string, got {_show(name)}")
+
+        obstacles = self.get(doc, "obstacles", "")
+        if not isinstance(obstacles, list):
+            self.fail("obstacles", f"expected a list, got {_kind(obstacles)} {_show(obstacles)}")
+        shapes = [self.obstacle(o, f"obstacles[{i}]", dim) for i, o in enumerate(obstacles)]
+        scene = Scene(obstacles=shapes, low=low, high=high, name=name or Path(self.file).stem)
+
+        problems_doc = doc.get("problems", [])
+        if not isinstance(problems_doc, list):
+            self.fail("problems", f"expected a list, got {_kind(problems_doc)} {_show(problems_doc)}")
+        problems = self.problems(problems_doc, scene, robot)
+        return SceneFile(scene=scene, problems=problems, robot=robot)
+
+    # ------------------------------------------------------------------ obstacles
+    def obstacle(self, entry: Any, where: str, dim: int) -> Shape:
+        entry = self.obj(entry, where)
+        kind = self.get(entry, "type", where)
+        if not isinstance(kind, str) or kind not in OBSTACLE_TYPES:
+            self.fail(_join(where, "type"), f"unknown obstacle type {_show(kind)}; known: {', '.join(OBSTACLE_TYPES)}")
+        if kind in ("cylinder", "mesh") and dim != 3:
+            self.fail(_join(where, "type"), f"{kind} obstacles need a 3D scene (dim is {dim})")
+        at = lambda key: _join(where, key)  # noqa: E731
+        need = lambda key: self.get(entry, key, where)  # noqa: E731
+
+        if kind == "box":
+            rot_key = "angle" if dim == 2 else "quaternion"
+            self.only(entry, ("type", "center", "size", rot_key), where, f"a {dim}D box")
+            center = self.vector(need("center"), at("center"), dim)
+            size = self.vector(need("size"), at("size"), dim, positive=True)
+            if dim == 2:
+                rot = lie.so2_exp(self.number(entry.get("angle", 0.0), at("angle")))
+            else:
+                rot = self.quaternion(entry["quaternion"], at("quaternion")) if "quaternion" in entry else np.eye(3)
+            return Box(center=center, size=size, rotation=rot)
+        if kind == "sphere":
+            self.only(entry, ("type", "center", "radius"), where, "a sphere")
+            return Sphere(
+                center=self.vector(need("center"), at("center"), dim),
+                radius=self.number(need("radius"), at("radius"), positive=True),
+            )
+        if kind == "capsule":
+            self.only(entry, ("type", "a", "b", "radius"), where, "a capsule")
+            return Capsule(
+                a=self.vector(need("a"), at("a"), dim),
+                b=self.vector(need("b"), at("b"), dim),
+                radius=self.number(need("radius"), at("radius"), positive=True),
+            )
+        if kind == "cylinder":
+            self.only(entry, ("type", "center", "radius", "length", "quaternion"), where, "a cylinder")
+            center = self.vector(need("center"), at("center"), 3)
+            radius = self.number(need("radius"), at("radius"), positive=True)
+            length = self.number(need("length"), at("length"), positive=True)
+            rot = self.quaternion(entry["quaternion"], at("quaternion")) if "quaternion" in entry else np.eye(3)
+            return Cylinder(center=center, radius=radius, length=length, rotation=rot)
+        if kind == "mesh":
+            self.only(entry, ("type", "path", "scale", "position", "quaternion"), where, "a mesh")
+            path = self.file_path(need("path"), at("path"))
+            scale = np.ones(3)
+            if "scale" in entry:
+                s = entry["scale"]
+                scale = np.full(3, self.number(s, at("scale"), positive=True)) if not isinstance(s, list) else self.vector(s, at("scale"), 3, positive=True)
+            pos = self.vector(entry["position"], at("position"), 3) if "position" in entry else np.zeros(3)
+            rot = self.quaternion(entry["quaternion"], at("quaternion")) if "quaternion" in entry else np.eye(3)
+            vertices, faces = self.mesh_file(path, at("path"))
+            return Mesh(vertices=(vertices * scale) @ rot.T + pos, faces=faces, source=path)
+        # points
+        self.only(entry, ("type", "path"), where, "a point cloud")
+        path = self.file_path(need("path"), at("path"), POINT_FILE_SUFFIXES)
+        data = self.points_file(path, at("path"), dim)
+        return PointCloud(points=data[:, :dim], normals=data[:, dim:], source=path)
+
+    def mesh_file(self, path: Path, where: str) -> tuple[Array, NDArray[np.int64]]:
+        try:
+            import trimesh
+        except ImportError:  # pragma: no cover - trimesh is installed with the test extras
+            self.fail(where, "mesh obstacles need the 'trimesh' package (pip install trimesh)")
+        try:
+            mesh = trimesh.load(str(path), force="mesh", process=False)
+        except Exception as exc:  # trimesh raises many kinds of errors on bad files
+            self.fail(where, f"cannot load mesh {path.name!r}: {exc}")
+        vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), np.float64)
+        faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), np.int64)
+        if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+            self.fail(where, f"mesh {path.name!r} contains no triangles")
+        if not np.all(np.isfinite(vertices)) or faces.min() < 0 or faces.max() >= len(vertices):
+            self.fail(where, f"mesh {path.name!r} has invalid vertices or faces")
+        return vertices, faces
+
+    def points_file(self, path: Path, where: str, dim: int) -> Array:
+        try:
+            if path.suffix.lower() == ".npy":
+                data = np.load(path, allow_pickle=False)
+            else:
+                delimiter = "," if path.suffix.lower() == ".csv" else None
+                data = np.loadtxt(path, dtype=np.float64, delimiter=delimiter, comments="#", ndmin=2)
+        except Exception as exc:
+            self.fail(where, f"cannot read points file {path.name!r}: {exc}")
+        if not np.issubdtype(np.asarray(data).dtype, np.number):
+            self.fail(where, f"points file {path.name!r} does not hold numbers (dtype {data.dtype})")
+        data = np.asarray(data, np.float64)
+        if data.ndim != 2 or data.shape[1] != 2 * dim or data.shape[0] == 0:
+            self.fail(
+                where,
+                f"points file {path.name!r}: expected an array (P, {2 * dim}) of {dim} coordinates "
+                f"and {dim} normal components per row, got shape {data.shape}",
+            )
+        if not np.all(np.isfinite(data)):
+            self.fail(where, f"points file {path.name!r} contains NaN or infinite values")
+        return data
+
+    # ------------------------------------------------------------------ problems
+    def problems(self, entries: list[Any], scene: Scene, robot: str | None) -> list[Problem]:
+        dim = scene.dim
+        # the configuration length: the robot's, or (no robot named) whatever the first
+        # start holds among the lengths of the robots of this dimension
+        n_config = ROBOT_DIMS[robot][1] if robot is not None else None
+        allowed = sorted({c for d, c in ROBOT_DIMS.values() if d == dim})
+        out: list[Problem] = []
+        for i, entry in enumerate(entries):
+            where = f"problems[{i}]"
+            entry = self.obj(entry, where)
+            self.only(entry, _PROBLEM_FIELDS, where, "a problem")
+            tag = entry.get("tag", f"{scene.name}/{i}")
+            if not isinstance(tag, str):
+                self.fail(_join(where, "tag"), f"expected a string, got {_show(tag)}")
+            q = {}
+            for key in ("start", "goal"):
+                at = _join(where, key)
+                value = self.get(entry, key, where)
+                if n_config is None:
+                    if not (isinstance(value, list) and len(value) in allowed):
+                        names = " or ".join(str(a) for a in allowed)
+                        self.fail(at, f"expected {names} numbers (a configuration of a {dim}D robot), got {_show(value)}")
+                    n_config = len(value)
+                q[key] = self.configuration(self.vector(value, at, n_config), at, scene)
+            out.append(Problem(scene=scene, start=q["start"], goal=q["goal"], tag=tag))
+        return out
+
+    def configuration(self, q: Array, where: str, scene: Scene) -> Array:
+        dim = scene.dim
+        pos = q[:dim]
+        if np.any(pos < scene.low) or np.any(pos > scene.high):
+            self.fail(
+                where,
+                f"position {_show(pos.tolist())} lies outside the bounds "
+                f"{_show(scene.low.tolist())} .. {_show(scene.high.tolist())}",
+            )
+        if len(q) > dim:  # (x, y, z, qx, qy, qz, qw)
+            norm = np.linalg.norm(q[dim:])
+            if not norm > 1e-9:
+                self.fail(where, f"orientation quaternion {_show(q[dim:].tolist())} is zero")
+            q = np.concatenate([pos, q[dim:] / norm])
+        return q
+
+
+def load_scene(path: str | os.PathLike[str]) -> SceneFile:
+    """Read a scene file. Raises :class:`SceneFormatError` naming the file and the field for
+    any malformed or unsupported input."""
+    path = Path(path)
+    name = str(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise SceneFormatError(name, "", f"cannot read file: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise SceneFormatError(name, "", f"not UTF-8 text (byte {exc.start})") from None
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise SceneFormatError(name, "", f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+    except RecursionError:
+        raise SceneFormatError(name, "", "invalid JSON: nested too deeply") from None
+    return _Reader(name, path.parent).document(doc)
+
+
+# ============================================================================ writing
+def _floats(a: Array) -> list[float]:
+    return [float(x) for x in np.asarray(a, np.float64).reshape(-1)]
+
+
+def _is_rotation(r: Array) -> bool:
+    n = r.shape[0]
+    return bool(np.allclose(r @ r.T, np.eye(n), atol=1e-9) and np.linalg.det(r) > 0)
+
+
+def _write_obj(path: Path, mesh: Mesh) -> None:
+    """Wavefront OBJ with exact (shortest round-trip) coordinates."""
+    lines = ["# pointplan mesh obstacle (world frame)"]
+    lines += ["v %r %r %r" % tuple(float(x) for x in v) for v in mesh.vertices]
+    lines += ["f %d %d %d" % tuple(int(i) + 1 for i in f) for f in mesh.faces]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _obstacle_doc(shape: Shape, index: int, json_path: Path, dim: int) -> dict[str, Any]:
+    where = f"obstacles[{index}]"
+    if shape.dim != dim:
+        raise SceneFormatError(str(json_path), where, f"{type(shape).__name__} is {shape.dim}D in a {dim}D scene")
+    if isinstance(shape, Box):
+        out: dict[str, Any] = {"type": "box", "center": _floats(shape.center), "size": _floats(shape.size)}
+        rot = shape.rotation
+        if not _is_rotation(rot):
+            raise SceneFormatError(str(json_path), where, "box rotation is not a proper rotation matrix")
+        if not np.array_equal(rot, np.eye(dim)):
+            if dim == 2:
+                out["angle"] = float(lie.so2_log(rot))
+            else:
+                out["quaternion"] = _floats(lie.matrix_to_quat(rot))
+        return out
+    if isinstance(shape, Sphere):
+        return {"type": "sphere", "center": _floats(shape.center), "radius": float(shape.radius)}
+    if isinstance(shape, Capsule):
+        return {"type": "capsule", "a": _floats(shape.a), "b": _floats(shape.b), "radius": float(shape.radius)}
+    if isinstance(shape, Cylinder):
+        out = {"type": "cylinder", "center": _floats(shape.center), "radius": float(shape.radius), "length": float(shape.length)}
+        if not _is_rotation(shape.rotation):
+            raise SceneFormatError(str(json_path), where, "cylinder rotation is not a proper rotation matrix")
+        if not np.array_equal(shape.rotation, np.eye(3)):
+            out["quaternion"] = _floats(lie.matrix_to_quat(shape.rotation))
+        return out
+    if isinstance(shape, Mesh):
+        name = f"{json_path.stem}.mesh{index}.obj"
+        _write_obj(json_path.parent / name, shape)
+        return {"type": "mesh", "path": name}
+    if isinstance(shape, PointCloud):
+        name = f"{json_path.stem}.points{index}.npy"
+        np.save(json_path.parent / name, np.concatenate([shape.points, shape.normals], 1).astype(np.float64))
+        return {"type": "points", "path": name}
+    raise SceneFormatError(str(json_path), where, f"cannot save obstacles of type {type(shape).__name__}")
+
+
+def _dumps(value: Any, indent: int = 0) -> str:
+    """JSON with objects and lists of objects indented and number lists on one line."""
+    pad, inner = "  " * indent, "  " * (indent + 1)
+    if isinstance(value, dict):
+        if not value:
+            return "{}"
+        flat = all(not isinstance(v, (dict, list)) or (isinstance(v, list) and all(not isinstance(x, (dict, list)) for x in v)) for v in value.values())
+        if flat and indent >= 2:
+            return "{" + ", ".join(f"{json.dumps(k)}: {_dumps(v)}" for k, v in value.items()) + "}"
+        items = [f"{inner}{json.dumps(k)}: {_dumps(v, indent + 1)}" for k, v in value.items()]
+        return "{\n" + ",\n".join(items) + "\n" + pad + "}"
+    if isinstance(value, list):
+        if not value:
+            return "[]"
+        if all(not isinstance(x, (dict, list)) for x in value):
+            return "[" + ", ".join(_dumps(x) for x in value) + "]"
+        return "[\n" + ",\n".join(inner + _dumps(x, indent + 1) for x in value) + "\n" + pad + "]"
+    return json.dumps(value, allow_nan=False)
+
+
+def save_scene(
+    path: str | os.PathLike[str],
+    scene: Scene,
+    problems: Sequence[Problem] = (),
+    robot: Any = None,
+) -> None:
+    """Write ``scene`` (and problems) as a scene file that :func:`load_scene` reads back.
+
+    ``robot`` is a robot name or a :class:`~pointplan.robots.base.Robot`. Mesh and point
+    obstacles are written next to the JSON file as ``<stem>.mesh<i>.obj`` and
+    ``<stem>.points<i>.npy`` (world frame). The document is validated before the JSON file
+    is written: a scene that could not be loaded back raises :class:`SceneFormatError`.
+    """
+    path = Path(path)
+    name = robot if robot is None or isinstance(robot, str) else getattr(robot, "name", None)
+    if robot is not None and name not in ROBOT_DIMS:
+        raise SceneFormatError(str(path), "robot", f"unknown robot {robot!r}; known: {', '.join(ROBOT_DIMS)}")
+    dim = scene.dim
+    doc: dict[str, Any] = {"format": FORMAT, "version": VERSION, "dim": dim}
+    if scene.name:
+        doc["name"] = scene.name
+    doc["bounds"] = {"low": _floats(scene.low), "high": _floats(scene.high)}
+    if name is not None:
+        doc["robot"] = name
+    doc["obstacles"] = [_obstacle_doc(s, i, path, dim) for i, s in enumerate(scene.obstacles)]
+    probs = []
+    for p in problems:
+        entry: dict[str, Any] = {"start": _floats(p.start), "goal": _floats(p.goal)}
+        if p.tag:
+            entry["tag"] = p.tag
+        probs.append(entry)
+    doc["problems"] = probs
+    # validate exactly as the reader will (this also catches NaN and bad problems)
+    try:
+        text = _dumps(doc) + "\n"
+    except ValueError as exc:
+        raise SceneFormatError(str(path), "", f"cannot write non-finite numbers: {exc}") from None
+    _Reader(str(path), path.parent).document(json.loads(text))
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)

@@ -1,0 +1,160 @@
+"""Environment conformance, determinism, dynamics and rewards."""
+
+from __future__ import annotations
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import pointplan  # noqa: F401  (registers the ids)
+from pointplan.envs import PlanningEnv, PlanningVectorEnv
+from pointplan.geometry.shapes import Box
+from pointplan.scenes import Problem, Scene
+from pointplan.scenes.scenarios import Narrow2DScenario
+
+
+@pytest.mark.parametrize("observation", ["surface", "surface-normals", "interior", "image"])
+def test_check_env_passes(observation: str) -> None:
+    env = gym.make("pointplan/Narrow2D-v0", observation=observation)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        check_env(env.unwrapped, skip_render_check=True)
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+
+
+def test_settings_are_keyword_arguments() -> None:
+    env = gym.make("pointplan/Narrow2D-v0", observation="surface", n_points=32, horizon=7)
+    obs, _ = env.reset(seed=0)
+    assert obs["observation"].shape == (32, 2)
+    for t in range(7):
+        _, _, term, trunc, _ = env.step(np.zeros(2, np.float32))
+    assert trunc and not term
+
+
+def test_unknown_settings_fail_clearly() -> None:
+    with pytest.raises(TypeError):
+        gym.make("pointplan/Narrow2D-v0", obsevation="surface")
+    with pytest.raises(ValueError, match="unknown observation"):
+        gym.make("pointplan/Narrow2D-v0", observation="lidar")
+    with pytest.raises(ValueError, match="unknown environment"):
+        PlanningEnv("narrow3000")
+
+
+def _rollout(seed: int, steps: int = 60) -> list[tuple]:
+    env = gym.make("pointplan/Narrow2D-v0")
+    obs, _ = env.reset(seed=seed)
+    env.action_space.seed(seed)
+    out = [tuple(np.concatenate([v.ravel() for v in obs.values()]))]
+    for _ in range(steps):
+        obs, r, term, trunc, info = env.step(env.action_space.sample())
+        out.append((tuple(np.concatenate([v.ravel() for v in obs.values()])), r, term, trunc, info["collided"]))
+        if term or trunc:
+            obs, _ = env.reset()
+    return out
+
+
+def test_same_seed_same_episode() -> None:
+    assert _rollout(3) == _rollout(3)
+    assert _rollout(3) != _rollout(4)
+
+
+def _open_scene() -> Scene:
+    return Scene([Box(center=[0.5, 0.5], size=[0.2, 0.2])], low=np.zeros(2), high=np.ones(2))
+
+
+def test_rewards_and_success() -> None:
+    env = PlanningEnv("narrow2d")
+    scene = _open_scene()
+    # free move far from the goal: -||a|| - 0.1
+    env.reset(seed=0, options={"problem": Problem(scene, [0.1, 0.1], [0.9, 0.1])})
+    _, r, term, _, info = env.step(np.array([1.0, 0.0], np.float32))
+    assert not info["collided"] and not term
+    assert r == pytest.approx(-1.0 - 0.1)
+    assert env.core.q[0] == pytest.approx([0.17, 0.1])
+    # into the box: collided, -||a|| - 4, and the robot stops before the box
+    env.reset(seed=0, options={"problem": Problem(scene, [0.35, 0.5], [0.1, 0.9])})
+    _, r, _, _, info = env.step(np.array([1.0, 0.0], np.float32))
+    assert info["collided"]
+    assert r == pytest.approx(-1.0 - 4.0)
+    assert env.core.q[0, 0] <= 0.4 - 0.01 + 1e-9
+    # reaching the goal: +20 and the episode ends
+    env.reset(seed=0, options={"problem": Problem(scene, [0.1, 0.1], [0.16, 0.1])})
+    _, r, term, _, info = env.step(np.array([0.5, 0.0], np.float32))
+    assert info["is_success"] and term
+    assert r == pytest.approx(-0.5 - 0.1 + 20.0)
+
+
+def test_tiny_moves_are_checked() -> None:
+    env = PlanningEnv("narrow2d")
+    scene = _open_scene()
+    env.reset(seed=0, options={"problem": Problem(scene, [0.385, 0.5], [0.1, 0.9])})
+    _, _, _, _, info = env.step(np.array([0.1, 0.0], np.float32))  # a 0.007 move
+    assert info["collided"]
+    assert info["collision_checks"] == 1
+
+
+def test_positions_are_clipped_to_bounds() -> None:
+    env = PlanningEnv("narrow2d")
+    env.reset(seed=0, options={"problem": Problem(_open_scene(), [0.98, 0.02], [0.1, 0.9])})
+    env.step(np.array([1.0, -1.0], np.float32))
+    assert env.core.q[0] == pytest.approx([1.0, 0.0])
+
+
+def test_observation_is_in_robot_frame() -> None:
+    env = PlanningEnv("narrow2d", observation="surface-normals", n_points=500)
+    scene = _open_scene()
+    obs, _ = env.reset(seed=0, options={"problem": Problem(scene, [0.1, 0.2], [0.9, 0.9])})
+    pts = obs["observation"][:, :2] + np.array([0.1, 0.2])
+    # every world point lies on the box boundary, and its normal points outwards
+    local = pts - 0.5
+    assert np.allclose(np.max(np.abs(local), axis=1), 0.1, atol=1e-6)
+    normals = obs["observation"][:, 2:]
+    assert np.all(np.sum(normals * local, axis=1) > 0)
+
+
+def test_compute_reward_matches_env() -> None:
+    env = PlanningEnv("narrow2d")
+    obs, _ = env.reset(seed=5)
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        a = rng.uniform(-1, 1, 2).astype(np.float32)
+        obs, r, term, trunc, info = env.step(a)
+        r2 = env.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)
+        assert float(r2) == pytest.approx(r, abs=1e-5)
+        if term or trunc:
+            obs, _ = env.reset()
+
+
+def test_vector_env_matches_single_envs() -> None:
+    problems = Narrow2DScenario().problems("test", 4, seed=0)
+    venv = PlanningVectorEnv("narrow2d", num_envs=4)
+    venv.reset(seed=0, options={"problems": problems})
+    singles = [PlanningEnv("narrow2d") for _ in problems]
+    for env, p in zip(singles, problems):
+        env.reset(seed=0, options={"problem": p})
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        a = rng.uniform(-1, 1, (4, 2)).astype(np.float32)
+        _, r, term, trunc, info = venv.step(a)
+        for i, env in enumerate(singles):
+            if term[i] or trunc[i]:
+                continue
+            _, ri, _, _, inf = env.step(a[i])
+            assert ri == pytest.approx(r[i])
+            assert inf["collided"] == info["collided"][i]
+            assert env.core.q[0] == pytest.approx(venv.core.q[i])
+
+
+def test_vector_env_autoresets() -> None:
+    venv = gym.make_vec("pointplan/Narrow2D-v0", num_envs=3, vectorization_mode="vector_entry_point", horizon=5)
+    obs, _ = venv.reset(seed=0)
+    assert obs["observation"].shape == (3, 64, 4)
+    for t in range(5):
+        obs, r, term, trunc, info = venv.step(np.zeros((3, 2), np.float32))
+    assert trunc.all()
+    assert "final_obs" in info and info["_final"].all()
+    assert np.all(venv.unwrapped.core.t == 0)
