@@ -1,0 +1,146 @@
+"""Soft actor-critic with automatic entropy tuning, on goal-conditioned batches.
+
+One file, top to bottom: ``SAC.update`` takes a replay ``Batch`` (with hindsight goals),
+recomputes rewards and goal vectors in the robot frame, and takes one gradient step for
+the critics, the actor and the temperature.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from ..envs.core import EnvConfig
+from ..models.actor_critic import Actor, NetConfig, TwinCritic, build_networks
+from ..robots.base import Robot
+from .replay import Batch
+
+
+@dataclass(frozen=True)
+class SACConfig:
+    """SAC hyperparameters; defaults are the paper's."""
+
+    lr: float = 3e-4
+    batch_size: int = 256
+    gamma: float = 0.99
+    tau: float = 5e-3
+    #: target entropy per action dimension (the target is this times dim(A))
+    target_entropy_scale: float = -1.0
+    init_alpha: float = 1.0
+    her_ratio: float = 0.8
+    buffer_size: int = 1_000_000
+
+
+def batch_rewards(robot: Robot, env: EnvConfig, b: Batch) -> tuple[np.ndarray, np.ndarray]:
+    """Rewards and success flags of (possibly relabelled) transitions, as the env gives them."""
+    success = (robot.distance(b.q_next, b.goal) < env.goal_tolerance) & ~b.collided
+    reward = -b.action_norm + np.where(b.collided, env.reward_collision, env.reward_free) + env.reward_success * success
+    return reward, success
+
+
+class SAC:
+    """Actor, twin critic, target critic and temperature, with their optimisers."""
+
+    def __init__(self, robot: Robot, env: EnvConfig, obs_shape: tuple[int, ...], net: NetConfig, cfg: SACConfig, device: str = "cpu") -> None:
+        self.robot, self.env, self.cfg, self.net_cfg = robot, env, cfg, net
+        self.device = torch.device(device)
+        goal_dim = robot.twist_dim
+        self.actor, self.critic = build_networks(obs_shape, goal_dim, robot.twist_dim, net)
+        self.actor.to(self.device)
+        self.critic.to(self.device)
+        self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
+        actor_params = self.actor.head.parameters() if self.actor.detach_encoder else self.actor.parameters()
+        self.actor_opt = torch.optim.Adam(actor_params, lr=cfg.lr)
+        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr)
+        self.log_alpha = torch.tensor(np.log(cfg.init_alpha), dtype=torch.float32, device=self.device, requires_grad=True)
+        self.alpha_opt = torch.optim.Adam([self.log_alpha], lr=cfg.lr)
+        self.target_entropy = cfg.target_entropy_scale * robot.twist_dim
+        self.updates = 0
+
+    # ------------------------------------------------------------------ helpers
+    def tensor(self, x: np.ndarray) -> torch.Tensor:
+        return torch.as_tensor(np.asarray(x, np.float32), device=self.device)
+
+    def goal_vectors(self, q: np.ndarray, goal: np.ndarray) -> torch.Tensor:
+        return self.tensor(self.robot.goal_vector(q, goal))
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray, deterministic: bool = False) -> np.ndarray:
+        o, g = self.tensor(obs), self.goal_vectors(q, goal)
+        a = self.actor.act(o, g) if deterministic else self.actor.sample(o, g)[0]
+        return a.cpu().numpy()
+
+    # ------------------------------------------------------------------ update
+    def update(self, b: Batch) -> dict[str, float]:
+        reward, success = batch_rewards(self.robot, self.env, b)
+        obs, next_obs = self.tensor(b.obs), self.tensor(b.next_obs)
+        g, g_next = self.goal_vectors(b.q, b.goal), self.goal_vectors(b.q_next, b.goal)
+        a = self.tensor(b.action)
+        r = self.tensor(reward)
+        not_done = self.tensor(~success)  # bootstrapping stops only on success
+        alpha = self.log_alpha.exp().detach()
+
+        with torch.no_grad():
+            a2, logp2 = self.actor.sample(next_obs, g_next)
+            q1t, q2t = self.critic_target(next_obs, g_next, a2)
+            target = r + self.cfg.gamma * not_done * (torch.min(q1t, q2t) - alpha * logp2)
+        q1, q2 = self.critic(obs, g, a)
+        critic_loss = nn.functional.mse_loss(q1, target) + nn.functional.mse_loss(q2, target)
+        self.critic_opt.zero_grad(set_to_none=True)
+        critic_loss.backward()
+        self.critic_opt.step()
+
+        self.critic.requires_grad_(False)
+        a_pi, logp = self.actor.sample(obs, g)
+        q1p, q2p = self.critic(obs, g, a_pi)
+        actor_loss = (alpha * logp - torch.min(q1p, q2p)).mean()
+        self.actor_opt.zero_grad(set_to_none=True)
+        actor_loss.backward()
+        self.actor_opt.step()
+        self.critic.requires_grad_(True)
+
+        alpha_loss = -(self.log_alpha * (logp.detach() + self.target_entropy)).mean()
+        self.alpha_opt.zero_grad(set_to_none=True)
+        alpha_loss.backward()
+        self.alpha_opt.step()
+
+        with torch.no_grad():
+            for p, pt in zip(self.critic.parameters(), self.critic_target.parameters()):
+                pt.mul_(1 - self.cfg.tau).add_(p, alpha=self.cfg.tau)
+        self.updates += 1
+        return {
+            "critic_loss": critic_loss.item(),
+            "actor_loss": actor_loss.item(),
+            "alpha": float(alpha),
+            "q_mean": q1.mean().item(),
+            "entropy": -logp.mean().item(),
+        }
+
+    # ------------------------------------------------------------------ state
+    def state_dict(self) -> dict[str, Any]:
+        return {
+            "actor": self.actor.state_dict(),
+            "critic": self.critic.state_dict(),
+            "critic_target": self.critic_target.state_dict(),
+            "log_alpha": self.log_alpha.detach().cpu(),
+            "actor_opt": self.actor_opt.state_dict(),
+            "critic_opt": self.critic_opt.state_dict(),
+            "alpha_opt": self.alpha_opt.state_dict(),
+            "updates": self.updates,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.actor.load_state_dict(state["actor"])
+        self.critic.load_state_dict(state["critic"])
+        self.critic_target.load_state_dict(state["critic_target"])
+        with torch.no_grad():
+            self.log_alpha.copy_(state["log_alpha"])
+        self.actor_opt.load_state_dict(state["actor_opt"])
+        self.critic_opt.load_state_dict(state["critic_opt"])
+        self.alpha_opt.load_state_dict(state["alpha_opt"])
+        self.updates = int(state["updates"])
