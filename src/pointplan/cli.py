@@ -42,6 +42,8 @@ def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
     kwargs: dict[str, Any] = {}
     if name == "birrt":
         kwargs = {"max_nodes": args.max_nodes, "seed": seed}
+    elif name == "policy":
+        kwargs = {"checkpoint": getattr(args, "checkpoint", None)}
     try:
         return make_planner(name, robot, **kwargs)
     except ValueError as e:
@@ -59,7 +61,8 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument("--env", default="narrow2d", help="scenario (default: narrow2d)")
     p.add_argument("--scene", help="plan on a scene file (JSON, see docs/scenes.md) instead of --env")
     p.add_argument("--robot", help="robot for a scene file that names none (disc2d, sphere3d, sshape)")
-    p.add_argument("--planner", default=planner_default, help="birrt or straight (default: %(default)s)")
+    p.add_argument("--planner", default=planner_default, help="birrt, straight or policy (default: %(default)s)")
+    p.add_argument("--checkpoint", help="trained policy for --planner policy")
     p.add_argument("--max-nodes", type=int, default=20000, help="Bi-RRT node budget (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="problem-set seed (default: %(default)s)")
 
@@ -147,6 +150,82 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _net_config(args: argparse.Namespace) -> Any:
+    from .models.actor_critic import NetConfig
+    from .models.encoders import EncoderConfig
+
+    if args.paper:
+        return NetConfig(EncoderConfig(args.encoder, 256, 3), head_width=256, head_layers=3, critic_action="points", shared_encoder=False)
+    shared = args.encoder_sharing == "shared"
+    action = args.critic_action or ("pooled" if shared else "points")
+    return NetConfig(EncoderConfig(args.encoder, args.width, args.layers), head_width=args.width, head_layers=args.layers, critic_action=action, shared_encoder=shared)
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from .learning.sac import SACConfig
+    from .learning.train import TrainConfig, config_from_dict, train
+
+    if args.resume:
+        from .learning.checkpoint import load_checkpoint
+
+        cfg = config_from_dict(load_checkpoint(args.resume)["train_config"])
+        cfg = TrainConfig(**{**cfg.__dict__, "total_steps": args.steps or cfg.total_steps})
+    else:
+        cfg = TrainConfig(
+            env=args.env,
+            observation=args.observation,
+            n_points=args.n_points,
+            num_envs=args.num_envs,
+            total_steps=args.steps or 200_000,
+            updates_per_step=args.updates_per_step,
+            eval_every=args.eval_every,
+            eval_episodes=args.eval_episodes,
+            target_success=args.target_success,
+            seed=args.seed,
+            device=args.device,
+            net=_net_config(args),
+            sac=SACConfig(batch_size=args.batch_size),
+            init_actor=args.init_actor,
+        )
+    res = train(cfg, args.run_dir, progress=not args.quiet, resume=args.resume)
+    print(f"best validation success {res.best_success:.3f} after {res.steps} env steps, {res.wall_time_s:.0f} s; checkpoints in {res.run_dir}")
+    return 0
+
+
+def cmd_bc(args: argparse.Namespace) -> int:
+    from .learning.bc import BCConfig, train_bc
+
+    cfg = BCConfig(
+        env=args.env,
+        observation=args.observation,
+        n_points=args.n_points,
+        n_problems=args.problems,
+        epochs=args.epochs,
+        seed=args.seed,
+        device=args.device,
+        net=_net_config(args),
+    )
+    summary = train_bc(cfg, args.run_dir, progress=not args.quiet)
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+def _add_net(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--env", default="narrow2d")
+    p.add_argument("--observation", default="surface-normals", help="surface, surface-normals, interior or image")
+    p.add_argument("--n-points", type=int, default=64)
+    p.add_argument("--encoder", default="pointnet", help="pointnet, mlp or cnn (use cnn with --observation image)")
+    p.add_argument("--width", type=int, default=64, help="layer width (default: %(default)s)")
+    p.add_argument("--layers", type=int, default=3)
+    p.add_argument("--encoder-sharing", choices=["shared", "separate"], default="shared", help="one encoder for actor and critics, or one each")
+    p.add_argument("--critic-action", choices=["points", "pooled"], help="where the critic sees the action (default: pooled if shared, else points)")
+    p.add_argument("--paper", action="store_true", help="the paper's networks: 3 x 256, separate encoders, action on every point")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default="cpu", help="cpu or cuda")
+    p.add_argument("--run-dir", default="runs/latest", help="where checkpoints and logs go (default: %(default)s)")
+    p.add_argument("--quiet", action="store_true")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
@@ -176,6 +255,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_plan)
 
+    p = sub.add_parser("train", help="train a policy with SAC + HER")
+    _add_net(p)
+    p.add_argument("--steps", type=int, help="environment steps to collect (default: 200000)")
+    p.add_argument("--num-envs", type=int, default=16, help="workspaces stepping together")
+    p.add_argument("--updates-per-step", type=float, default=0.25, help="gradient steps per env step")
+    p.add_argument("--batch-size", type=int, default=256)
+    p.add_argument("--eval-every", type=int, default=10000)
+    p.add_argument("--eval-episodes", type=int, default=100)
+    p.add_argument("--target-success", type=float, default=1.01, help="stop once validation success reaches this")
+    p.add_argument("--init-actor", help="start the actor from this checkpoint (e.g. a BC one)")
+    p.add_argument("--resume", help="continue a run from its last.pt")
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("bc", help="behavioural cloning from Bi-RRT demonstrations")
+    _add_net(p)
+    p.add_argument("--problems", type=int, default=2000, help="demonstration problems (default: %(default)s)")
+    p.add_argument("--epochs", type=int, default=30)
+    p.set_defaults(func=cmd_bc)
+
     p = sub.add_parser("demo", help="plan 2D-Narrow test problems and draw a few")
     p.add_argument("--episodes", type=int, default=100, help="test problems (default: %(default)s)")
     p.add_argument("--figures", type=int, default=8, help="problems drawn (default: %(default)s)")
@@ -194,7 +292,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CLIError as e:
         print(f"pointplan: error: {e}", file=sys.stderr)
         return 2
-    except (ValueError, FileNotFoundError) as e:
+    except (ValueError, FileNotFoundError, RuntimeError) as e:
         # scene-file and argument problems come with messages meant for the user
         print(f"pointplan: error: {e}", file=sys.stderr)
         return 2

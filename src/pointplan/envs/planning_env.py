@@ -30,9 +30,14 @@ def _goal_space(core: BatchedCore) -> spaces.Box:
 
 def _info_arrays(info: Any, n: int) -> tuple[Array, NDArray[np.bool_]]:
     """(action_norm, collided) from one info dict, or a sequence of them (HER buffers)."""
+    need = "compute_reward needs the step's info['action_norm'] and info['collided'] (with stable-baselines3's HerReplayBuffer, pass copy_info_dict=True)"
     if isinstance(info, dict):
+        if "action_norm" not in info or "collided" not in info:
+            raise KeyError(need)
         return np.asarray(info["action_norm"], np.float64), np.asarray(info["collided"], bool)
     infos = list(np.asarray(info, dtype=object).reshape(-1))
+    if any("action_norm" not in i or "collided" not in i for i in infos):
+        raise KeyError(need)
     return (
         np.array([float(i["action_norm"]) for i in infos]).reshape(n),
         np.array([bool(i["collided"]) for i in infos]).reshape(n),

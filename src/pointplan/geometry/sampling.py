@@ -95,7 +95,8 @@ def surface_points(shapes: Sequence[Shape], spacing: float, low: Array | None = 
         nrm.append(n)
         owner.append(np.full(len(p), k))
     if not pts:
-        return np.zeros((0, 0)), np.zeros((0, 0))
+        d = len(low) if low is not None else (shapes[0].dim if shapes else 0)
+        return np.zeros((0, d)), np.zeros((0, d))
     p, n, own = np.concatenate(pts), np.concatenate(nrm), np.concatenate(owner)
     keep = ~_inside_other(p, own, shapes)
     if low is not None and high is not None:

@@ -19,6 +19,7 @@ import torch
 from ..envs.core import EnvConfig
 from ..models.actor_critic import Actor, NetConfig
 from ..models.encoders import EncoderConfig
+from ..models.inputs import goal_input, obs_input
 from ..observers import make_observer
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
@@ -122,12 +123,12 @@ def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: D
     if demos is None:
         demos = generate_demos(scenario, cfg.n_problems, cfg.seed, progress=progress)
     t_demos = time.perf_counter() - t0
-    obs = observe_demos(demos, robot, env, rng)
+    obs = obs_input(robot, observe_demos(demos, robot, env, rng))
     obs_shape = tuple(obs.shape[1:])
     device = torch.device(cfg.device)
     actor = Actor(obs_shape, robot.twist_dim, robot.twist_dim, cfg.net).to(device)
     opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr)
-    goal_vec = robot.goal_vector(demos.q, demos.goal).astype(np.float32)
+    goal_vec = goal_input(robot, demos.q, demos.goal)
     act = torch.as_tensor(demos.action, device=device)
     g_all = torch.as_tensor(goal_vec, device=device)
     losses = []
@@ -138,7 +139,7 @@ def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: D
         epochs = tqdm(epochs, desc="behavioural cloning", unit="epoch")
     for ep in epochs:
         if cfg.refresh_every and ep > 0 and ep % cfg.refresh_every == 0:
-            obs = observe_demos(demos, robot, env, rng)
+            obs = obs_input(robot, observe_demos(demos, robot, env, rng))
         o_all = torch.as_tensor(obs, device=device)
         perm = torch.as_tensor(rng.permutation(len(demos)), device=device)
         total = 0.0

@@ -16,7 +16,8 @@ import torch
 from torch import nn
 
 from ..envs.core import EnvConfig
-from ..models.actor_critic import Actor, NetConfig, TwinCritic, build_networks
+from ..models.actor_critic import NetConfig, build_networks
+from ..models.inputs import goal_input, obs_input
 from ..robots.base import Robot
 from .replay import Batch
 
@@ -67,18 +68,21 @@ class SAC:
         return torch.as_tensor(np.asarray(x, np.float32), device=self.device)
 
     def goal_vectors(self, q: np.ndarray, goal: np.ndarray) -> torch.Tensor:
-        return self.tensor(self.robot.goal_vector(q, goal))
+        return self.tensor(goal_input(self.robot, q, goal))
+
+    def observations(self, obs: np.ndarray) -> torch.Tensor:
+        return self.tensor(obs_input(self.robot, obs))
 
     @torch.no_grad()
     def act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray, deterministic: bool = False) -> np.ndarray:
-        o, g = self.tensor(obs), self.goal_vectors(q, goal)
+        o, g = self.observations(obs), self.goal_vectors(q, goal)
         a = self.actor.act(o, g) if deterministic else self.actor.sample(o, g)[0]
         return a.cpu().numpy()
 
     # ------------------------------------------------------------------ update
     def update(self, b: Batch) -> dict[str, float]:
         reward, success = batch_rewards(self.robot, self.env, b)
-        obs, next_obs = self.tensor(b.obs), self.tensor(b.next_obs)
+        obs, next_obs = self.observations(b.obs), self.observations(b.next_obs)
         g, g_next = self.goal_vectors(b.q, b.goal), self.goal_vectors(b.q_next, b.goal)
         a = self.tensor(b.action)
         r = self.tensor(reward)

@@ -168,7 +168,6 @@ def train(
     credit, last_losses = 0.0, {}
     t_start = time.perf_counter()
     next_eval = (steps // cfg.eval_every + 1) * cfg.eval_every
-    start_steps = steps
     bar = None
     if progress:
         from tqdm import tqdm
@@ -236,7 +235,7 @@ def train(
                 "rng": rng.bit_generator.state,
                 "torch_rng": torch.get_rng_state(),
             }
-            extra = {"env_steps": steps, "val_success": val, "wall_time_s": wall}
+            extra = {"env_steps": steps, "val_success": val, "wall_time_s": wall, "horizon": core.horizon}
             save_checkpoint(run_dir / "last.pt", {**_checkpoint_payload(cfg, agent, obs_shape, robot.name, extra), "trainer": trainer_state})
             if val > best:
                 best = val
@@ -248,7 +247,6 @@ def train(
     if bar is not None:
         bar.close()
     wall = elapsed_before + time.perf_counter() - t_start
-    _ = start_steps
     return TrainResult(run_dir=run_dir, best_success=best, steps=steps, wall_time_s=wall, history=history)
 
 

@@ -16,6 +16,7 @@ from ..robots import make_robot
 from ..robots.base import Robot
 from .actor_critic import Actor, NetConfig
 from .encoders import EncoderConfig
+from .inputs import goal_input, obs_input
 
 
 def net_config_from_dict(d: dict[str, Any]) -> NetConfig:
@@ -63,6 +64,6 @@ class Policy:
     @torch.no_grad()
     def __call__(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """Actions ``(E, k)`` in [-1, 1] for observations ``(E, ...)``, configurations and goals."""
-        o = torch.as_tensor(np.asarray(obs, np.float32), device=self.device)
-        g = torch.as_tensor(self.robot.goal_vector(q, goal).astype(np.float32), device=self.device)
+        o = torch.as_tensor(obs_input(self.robot, obs), device=self.device)
+        g = torch.as_tensor(goal_input(self.robot, q, goal), device=self.device)
         return self.actor.act(o, g).cpu().numpy()

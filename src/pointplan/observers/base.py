@@ -124,6 +124,12 @@ class PointSetObserver(Observer):
     def observe(self, q: Array, rng: np.random.Generator) -> NDArray[np.float32]:
         pw, nw = self.select(rng)
         p, n = self.robot.to_body_frame(q, pw, nw)
+        assert self._stacked is not None
+        empty = self._stacked[2] == 0
+        if empty.any():  # a scene with nothing to see: all-zero features
+            p[empty] = 0.0
+            if n is not None:
+                n[empty] = 0.0
         if self.with_normals:
             assert n is not None
             return np.concatenate([p, n], -1).astype(np.float32)

@@ -13,13 +13,25 @@ from .straight import StraightLine
 PLANNERS: dict[str, Callable[..., Planner]] = {"birrt": BiRRT, "straight": StraightLine}
 
 
+def _policy_factory(robot: Robot, checkpoint: str | None = None, **kw: Any) -> Planner:
+    from .policy import PolicyPlanner
+
+    if not checkpoint:
+        raise ValueError("the policy planner needs a checkpoint (--checkpoint PATH)")
+    return PolicyPlanner(checkpoint, robot=robot, **kw)
+
+
+PLANNERS["policy"] = _policy_factory
+
+
 def register_planner(name: str, factory: Callable[..., Planner]) -> None:
     """Make ``factory(robot, **kw)`` available to :func:`make_planner` as ``name``."""
     PLANNERS[name.lower()] = factory
 
 
 def make_planner(name: str, robot: Robot, **kw: Any) -> Planner:
-    """A planner by name (``birrt``, ``straight``, or any registered one)."""
+    """A planner by name (``birrt``, ``straight``, ``policy`` with ``checkpoint=``, or any
+    registered one)."""
     try:
         factory = PLANNERS[name.lower()]
     except KeyError:

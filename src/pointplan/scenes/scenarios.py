@@ -88,11 +88,25 @@ class FixedScenario(Scenario):
         return super().problems(split, n, seed)
 
 
-SCENARIOS: dict[str, type[Scenario]] = {"narrow2d": Narrow2DScenario}
+class Empty2DScenario(Scenario):
+    """The unit square with no obstacles, for the 2D disc: a sanity check for learning."""
+
+    name = "empty2d"
+    horizon = 50
+
+    def __init__(self, robot: Robot | None = None) -> None:
+        self.robot = robot or Disc2D()
+        self._scene = Scene([], low=np.zeros(2), high=np.ones(2), name="empty2d")
+
+    def scene(self, split: str, index: int) -> Scene:
+        return self._scene
+
+
+SCENARIOS: dict[str, type[Scenario]] = {"narrow2d": Narrow2DScenario, "empty2d": Empty2DScenario}
 
 
 def make_scenario(name: str) -> Scenario:
-    """A scenario by name (``narrow2d``)."""
+    """A scenario by name (``narrow2d``, ``empty2d``)."""
     key = name.lower().replace("-", "").replace("_", "")
     try:
         return SCENARIOS[key]()

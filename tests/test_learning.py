@@ -1,0 +1,143 @@
+"""Encoders, hindsight relabelling, SAC, behavioural cloning and checkpoints."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from pointplan.envs import PlanningEnv
+from pointplan.envs.core import EnvConfig
+from pointplan.learning.bc import BCConfig, generate_demos, resample_path, train_bc
+from pointplan.learning.checkpoint import CheckpointError
+from pointplan.learning.replay import EpisodeReplay
+from pointplan.learning.sac import batch_rewards
+from pointplan.learning.train import TrainConfig, train
+from pointplan.models.actor_critic import NetConfig, build_networks
+from pointplan.models.encoders import EncoderConfig, PointNetEncoder
+from pointplan.models.policy import Policy
+from pointplan.planners.policy import PolicyPlanner
+from pointplan.robots import Disc2D
+from pointplan.scenes import Problem
+from pointplan.scenes.scenarios import Narrow2DScenario
+
+SMALL = NetConfig(EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True)
+
+
+def test_pointnet_is_permutation_invariant() -> None:
+    torch.manual_seed(0)
+    enc = PointNetEncoder(4, width=32, layers=3, extra=2)
+    x = torch.randn(5, 64, 4)
+    extra = torch.randn(5, 2)
+    perm = torch.randperm(64)
+    assert torch.allclose(enc(x, extra), enc(x[:, perm], extra), atol=1e-6)
+    # and not invariant to changing a point
+    y = x.clone()
+    y[:, 0] += 5.0
+    assert not torch.allclose(enc(x, extra), enc(y, extra))
+
+
+@pytest.mark.parametrize("action_on", ["points", "pooled"])
+def test_networks_shapes(action_on: str) -> None:
+    cfg = NetConfig(EncoderConfig(width=16, layers=2), head_width=16, head_layers=2, critic_action=action_on)
+    actor, critic = build_networks((64, 4), 2, 2, cfg)
+    obs, goal, act = torch.randn(7, 64, 4), torch.randn(7, 2), torch.rand(7, 2) * 2 - 1
+    a, logp = actor.sample(obs, goal)
+    assert a.shape == (7, 2) and logp.shape == (7,) and bool((a.abs() < 1).all())
+    q1, q2 = critic(obs, goal, act)
+    assert q1.shape == (7,) and q2.shape == (7,)
+
+
+def _collect(env: PlanningEnv, buffer: EpisodeReplay, episodes: int, rng: np.random.Generator) -> list:
+    """Random episodes into the buffer; returns (problem scene, per-step records)."""
+    log = []
+    for _ in range(episodes):
+        obs, _ = env.reset(seed=int(rng.integers(1 << 30)))
+        scene = env.core.scenes[0]
+        recs: dict[str, list] = {k: [] for k in ("obs", "next_obs", "q", "q_next", "goal", "action", "action_norm", "collided")}
+        done = False
+        while not done:
+            q = env.core.q[0].copy()
+            a = rng.uniform(-1, 1, 2).astype(np.float32)
+            nobs, _, term, trunc, info = env.step(a)
+            for k, v in (("obs", obs["observation"]), ("next_obs", nobs["observation"]), ("q", q), ("q_next", env.core.q[0].copy()), ("goal", env.core.goal[0].copy()), ("action", a), ("action_norm", info["action_norm"]), ("collided", info["collided"])):
+                recs[k].append(v)
+            obs, done = nobs, term or trunc
+        buffer.add_episode(*(np.asarray(recs[k]) for k in recs))
+        log.append(scene)
+    return log
+
+
+def test_relabelled_reward_equals_env_reward() -> None:
+    rng = np.random.default_rng(0)
+    env = PlanningEnv("narrow2d")
+    robot = env.robot
+    buf = EpisodeReplay(2000, (64, 4), 2, 2)
+    scenes = _collect(env, buf, 6, rng)
+    b = buf.sample(64, rng, her_ratio=1.0)
+    assert b.relabelled.mean() > 0.9
+    reward, success = batch_rewards(robot, EnvConfig(), b)
+    assert success.any()  # some relabelled goals are reached by their own transition
+    episode_of = buf.episode[:len(buf)]
+    idx = [int(np.flatnonzero((buf.q[: len(buf)] == b.q[i]).all(1) & (buf.action[: len(buf)] == b.action[i]).all(1))[0]) for i in range(len(b.q))]
+    for i in range(len(b.q)):
+        # replay the stored transition in a fresh env aiming at the relabelled goal
+        env.reset(seed=0, options={"problem": Problem(scenes[int(episode_of[idx[i]])], b.q[i], b.goal[i])})
+        _, r, term, _, info = env.step(b.action[i])
+        assert env.core.q[0] == pytest.approx(b.q_next[i])
+        assert r == pytest.approx(reward[i], abs=1e-6)
+        assert term == success[i]
+
+
+def test_sac_her_learns_empty_2d(tmp_path: Path) -> None:
+    """SAC + HER reaches 90% on the obstacle-free square within a small budget."""
+    cfg = TrainConfig(env="empty2d", num_envs=8, total_steps=12_000, warmup_steps=500, updates_per_step=0.5, eval_every=1_000, eval_episodes=100, target_success=0.95, net=SMALL)
+    res = train(cfg, tmp_path, progress=False)
+    assert res.best_success >= 0.9, res.history
+    assert (tmp_path / "best.pt").exists() and (tmp_path / "last.pt").exists() and (tmp_path / "metrics.csv").exists()
+
+
+def test_resample_path_makes_unit_actions() -> None:
+    robot = Disc2D()
+    path = np.array([[0.1, 0.1], [0.5, 0.1], [0.52, 0.3]])
+    r = resample_path(robot, path)
+    steps = robot.log(r[:-1], r[1:]) / robot.action_scale
+    assert np.all(np.abs(steps) <= 1 + 1e-9)
+    assert r[0] == pytest.approx(path[0]) and r[-1] == pytest.approx(path[-1])
+
+
+def test_bc_fits_demonstrations(tmp_path: Path) -> None:
+    scenario = Narrow2DScenario()
+    demos = generate_demos(scenario, 30, seed=0, progress=False)
+    assert len(demos) > 100
+    cfg = BCConfig(n_problems=30, epochs=60, net=SMALL, refresh_every=0)
+    summary = train_bc(cfg, tmp_path, progress=False, demos=demos)
+    # the expert actions have mean squared norm ~1.5; the fit must be far below that
+    assert summary["final_loss"] < 0.25
+    policy = Policy.from_checkpoint(tmp_path / "bc.pt")
+    assert policy.observation == "surface-normals"
+
+
+def test_checkpoint_round_trip_and_compatibility(tmp_path: Path) -> None:
+    cfg = BCConfig(n_problems=5, epochs=1, net=SMALL)
+    train_bc(cfg, tmp_path, progress=False)
+    p1 = Policy.from_checkpoint(tmp_path / "bc.pt")
+    p2 = Policy.from_checkpoint(tmp_path / "bc.pt")
+    rng = np.random.default_rng(0)
+    obs = rng.normal(size=(9, 64, 4)).astype(np.float32)
+    q, g = rng.random((9, 2)), rng.random((9, 2))
+    assert np.array_equal(p1(obs, q, g), p2(obs, q, g))
+    # identical actions from a planner built on it, and clear refusals of mismatched envs
+    problem = Narrow2DScenario().problem("test", 0)
+    r1, r2 = PolicyPlanner(p1).plan(problem), PolicyPlanner(p2).plan(problem)
+    assert np.array_equal(r1.path, r2.path)
+    with pytest.raises(CheckpointError, match="observations"):
+        p1.check_env(Disc2D(), "image", (1, 64, 64))
+    with pytest.raises(ValueError, match="trained on"):
+        PolicyPlanner(p1, env=EnvConfig(observation="surface"))
+    bad = tmp_path / "junk.pt"
+    bad.write_bytes(b"not a checkpoint")
+    with pytest.raises(CheckpointError, match="junk.pt"):
+        Policy.from_checkpoint(bad)
