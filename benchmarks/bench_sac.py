@@ -1,0 +1,92 @@
+"""SAC update rate for several network configurations, and policy latency at batch 1.
+
+    python benchmarks/bench_sac.py            # ~5 s per configuration
+    python benchmarks/bench_sac.py --quick
+
+Updates use batches of 256 transitions of 64 points x 4 features (2D-Narrow observations
+from the environment), HER relabelling included. Run it on an otherwise idle machine:
+PyTorch's worker threads slow down badly when another process competes for the cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+
+from pointplan.envs.core import BatchedCore, EnvConfig
+from pointplan.learning.replay import EpisodeReplay
+from pointplan.learning.sac import SAC, SACConfig
+from pointplan.models.actor_critic import NetConfig
+from pointplan.models.encoders import EncoderConfig
+from pointplan.scenes.scenarios import Narrow2DScenario
+
+CONFIGS = {
+    "paper (3x256, separate, action on points)": NetConfig(EncoderConfig(width=256), head_width=256, critic_action="points"),
+    "3x256, separate, action after pooling": NetConfig(EncoderConfig(width=256), head_width=256, critic_action="pooled"),
+    "3x256, shared": NetConfig(EncoderConfig(width=256), head_width=256, critic_action="pooled", shared_encoder=True),
+    "3x128, shared": NetConfig(EncoderConfig(width=128), head_width=128, critic_action="pooled", shared_encoder=True),
+    "3x64, separate, action after pooling": NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled"),
+    "3x64, shared (default)": NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True),
+    "3x32, shared": NetConfig(EncoderConfig(width=32), head_width=32, critic_action="pooled", shared_encoder=True),
+}
+
+
+def filled_buffer(rng: np.random.Generator, episodes: int = 40) -> EpisodeReplay:
+    scenario = Narrow2DScenario()
+    core = BatchedCore(scenario, 8, EnvConfig())
+    buf = EpisodeReplay(episodes * 50 + 100, (64, 4), 2, 2)
+    for _ in range(episodes // 8):
+        core.reset_envs(range(8), rng)
+        obs, q, qn, a, col = [], [], [], [], []
+        for _ in range(50):
+            obs.append(core.observe(rng)["observation"])
+            q.append(core.q.copy())
+            act = rng.uniform(-1, 1, (8, 2)).astype(np.float32)
+            _, _, _, info = core.step(act)
+            qn.append(core.q.copy())
+            a.append(act)
+            col.append(info["collided"])
+        obs_a = np.stack(obs, 1)
+        for i in range(8):
+            buf.add_episode(obs_a[i], obs_a[i], np.stack(q, 1)[i], np.stack(qn, 1)[i], np.broadcast_to(core.goal[i], (50, 2)), np.stack(a, 1)[i], np.linalg.norm(np.stack(a, 1)[i], axis=1), np.stack(col, 1)[i])
+    return buf
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--device", default="cpu")
+    args = ap.parse_args()
+    duration = 2.0 if args.quick else 5.0
+    rng = np.random.default_rng(0)
+    torch.manual_seed(0)
+    buf = filled_buffer(rng)
+    robot = Narrow2DScenario().robot
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {args.device}")
+    print(f"{'network':45s} {'updates/s':>10s} {'vs paper':>9s} {'latency b=1 (ms)':>17s}")
+    base = None
+    for name, net in CONFIGS.items():
+        sac = SAC(robot, EnvConfig(), (64, 4), net, SACConfig(), device=args.device)
+        sac.update(buf.sample(256, rng))
+        n, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < duration:
+            sac.update(buf.sample(256, rng))
+            n += 1
+        rate = n / (time.perf_counter() - t0)
+        base = base or rate
+        b = buf.sample(1, rng)
+        for _ in range(20):
+            sac.act(b.obs, b.q, b.goal, deterministic=True)
+        m, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < duration / 4:
+            sac.act(b.obs, b.q, b.goal, deterministic=True)
+            m += 1
+        lat = (time.perf_counter() - t0) / m * 1000
+        print(f"{name:45s} {rate:10.1f} {rate / base:8.1f}x {lat:17.2f}")
+
+
+if __name__ == "__main__":
+    main()
