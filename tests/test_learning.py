@@ -141,3 +141,19 @@ def test_checkpoint_round_trip_and_compatibility(tmp_path: Path) -> None:
     bad.write_bytes(b"not a checkpoint")
     with pytest.raises(CheckpointError, match="junk.pt"):
         Policy.from_checkpoint(bad)
+
+
+def test_actor_delay_keeps_the_actor_still() -> None:
+    from pointplan.learning.sac import SAC, SACConfig
+
+    rng = np.random.default_rng(0)
+    env = PlanningEnv("narrow2d")
+    buf = EpisodeReplay(500, (64, 4), 2, 2)
+    _collect(env, buf, 2, rng)
+    sac = SAC(env.robot, EnvConfig(), (64, 4), SMALL, SACConfig(batch_size=32, actor_delay=3))
+    before = [p.detach().clone() for p in sac.actor.head.parameters()]
+    for _ in range(3):
+        sac.update(buf.sample(32, rng))
+    assert all(torch.equal(a, b) for a, b in zip(before, sac.actor.head.parameters()))
+    sac.update(buf.sample(32, rng))
+    assert not all(torch.equal(a, b) for a, b in zip(before, sac.actor.head.parameters()))

@@ -184,7 +184,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             seed=args.seed,
             device=args.device,
             net=_net_config(args),
-            sac=SACConfig(batch_size=args.batch_size),
+            sac=SACConfig(batch_size=args.batch_size, init_alpha=args.init_alpha, actor_delay=args.actor_delay),
             init_actor=args.init_actor,
         )
     res = train(cfg, args.run_dir, progress=not args.quiet, resume=args.resume)
@@ -265,6 +265,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--eval-episodes", type=int, default=100)
     p.add_argument("--target-success", type=float, default=1.01, help="stop once validation success reaches this")
     p.add_argument("--init-actor", help="start the actor from this checkpoint (e.g. a BC one)")
+    p.add_argument("--init-alpha", type=float, default=1.0, help="initial entropy temperature (default: %(default)s)")
+    p.add_argument("--actor-delay", type=int, default=0, help="critic-only updates before the actor moves (default: %(default)s)")
     p.add_argument("--resume", help="continue a run from its last.pt")
     p.set_defaults(func=cmd_train)
 

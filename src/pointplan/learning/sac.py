@@ -35,6 +35,9 @@ class SACConfig:
     init_alpha: float = 1.0
     her_ratio: float = 0.8
     buffer_size: int = 1_000_000
+    #: critic-only updates before the actor and temperature start to move (useful when the
+    #: actor starts from behavioural cloning and the critic from scratch)
+    actor_delay: int = 0
 
 
 def batch_rewards(robot: Robot, env: EnvConfig, b: Batch) -> tuple[np.ndarray, np.ndarray]:
@@ -89,19 +92,30 @@ class SAC:
         not_done = self.tensor(~success)  # bootstrapping stops only on success
         alpha = self.log_alpha.exp().detach()
 
+        shared = self.critic.shared is not None
         with torch.no_grad():
-            a2, logp2 = self.actor.sample(next_obs, g_next)
+            h_next = self.critic.shared(next_obs) if shared else None
+            a2, logp2 = self.actor.sample(next_obs, g_next, h_next)
             q1t, q2t = self.critic_target(next_obs, g_next, a2)
             target = r + self.cfg.gamma * not_done * (torch.min(q1t, q2t) - alpha * logp2)
-        q1, q2 = self.critic(obs, g, a)
+        h = self.critic.shared(obs) if shared else None
+        q1, q2 = self.critic(obs, g, a, h)
         critic_loss = nn.functional.mse_loss(q1, target) + nn.functional.mse_loss(q2, target)
         self.critic_opt.zero_grad(set_to_none=True)
         critic_loss.backward()
         self.critic_opt.step()
 
+        if self.updates < self.cfg.actor_delay:
+            self._soft_update()
+            self.updates += 1
+            return {"critic_loss": critic_loss.item(), "alpha": float(alpha), "q_mean": q1.mean().item()}
+
+        # With a shared encoder the actor and the critic heads reuse the pooled features
+        # computed for the critic loss (detached: only the critic's loss trains the encoder).
+        h_pi = h.detach() if h is not None else None
         self.critic.requires_grad_(False)
-        a_pi, logp = self.actor.sample(obs, g)
-        q1p, q2p = self.critic(obs, g, a_pi)
+        a_pi, logp = self.actor.sample(obs, g, h_pi)
+        q1p, q2p = self.critic(obs, g, a_pi, h_pi)
         actor_loss = (alpha * logp - torch.min(q1p, q2p)).mean()
         self.actor_opt.zero_grad(set_to_none=True)
         actor_loss.backward()
@@ -113,9 +127,7 @@ class SAC:
         alpha_loss.backward()
         self.alpha_opt.step()
 
-        with torch.no_grad():
-            for p, pt in zip(self.critic.parameters(), self.critic_target.parameters()):
-                pt.mul_(1 - self.cfg.tau).add_(p, alpha=self.cfg.tau)
+        self._soft_update()
         self.updates += 1
         return {
             "critic_loss": critic_loss.item(),
@@ -124,6 +136,11 @@ class SAC:
             "q_mean": q1.mean().item(),
             "entropy": -logp.mean().item(),
         }
+
+    @torch.no_grad()
+    def _soft_update(self) -> None:
+        for p, pt in zip(self.critic.parameters(), self.critic_target.parameters()):
+            pt.mul_(1 - self.cfg.tau).add_(p, alpha=self.cfg.tau)
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict[str, Any]:

@@ -56,17 +56,18 @@ class Actor(nn.Module):
         self.head = mlp([feat + goal_dim] + [cfg.head_width] * cfg.head_layers + [2 * action_dim])
         self.action_dim = action_dim
 
-    def forward(self, obs: torch.Tensor, goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        h = self.encoder(obs)
+    def forward(self, obs: torch.Tensor, goal: torch.Tensor, features: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mean and log-std; pass ``features`` (the pooled encoding) to skip the encoder."""
+        h = self.encoder(obs) if features is None else features
         if self.detach_encoder:
             h = h.detach()
         out = self.head(torch.cat([h, goal], -1))
         mean, log_std = out.split(self.action_dim, -1)
         return mean, log_std.clamp(LOG_STD_MIN, LOG_STD_MAX)
 
-    def sample(self, obs: torch.Tensor, goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def sample(self, obs: torch.Tensor, goal: torch.Tensor, features: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """A reparameterised action in (-1, 1) and its log-probability ``(B,)``."""
-        mean, log_std = self(obs, goal)
+        mean, log_std = self(obs, goal, features)
         std = log_std.exp()
         u = mean + std * torch.randn_like(mean)
         a = torch.tanh(u)
@@ -111,9 +112,11 @@ class TwinCritic(nn.Module):
         self.q1 = QNetwork(obs_shape, goal_dim, action_dim, cfg, encoder)
         self.q2 = QNetwork(obs_shape, goal_dim, action_dim, cfg, encoder)
 
-    def forward(self, obs: torch.Tensor, goal: torch.Tensor, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        feats = self.shared(obs) if self.shared is not None else None
-        return self.q1(obs, goal, action, feats), self.q2(obs, goal, action, feats)
+    def forward(self, obs: torch.Tensor, goal: torch.Tensor, action: torch.Tensor, features: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Both Q-values; with a shared encoder, ``features`` skips it."""
+        if self.shared is not None and features is None:
+            features = self.shared(obs)
+        return self.q1(obs, goal, action, features), self.q2(obs, goal, action, features)
 
 
 def build_networks(obs_shape: tuple[int, ...], goal_dim: int, action_dim: int, cfg: NetConfig) -> tuple[Actor, TwinCritic]:

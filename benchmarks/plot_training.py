@@ -1,0 +1,52 @@
+"""Plot validation success against wall time (and env steps) for training runs.
+
+    python benchmarks/plot_training.py runs/a/metrics.csv runs/b/metrics.csv -o docs/img/training.png \
+        --labels "SAC+HER from scratch" "BC then SAC+HER"
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+
+def read(path: Path, offset_s: float = 0.0) -> dict[str, list[float]]:
+    with path.open() as f:
+        rows = list(csv.DictReader(f))
+    return {k: [float(r[k]) + (offset_s if k == "wall_time_s" else 0.0) for r in rows] for k in ("env_steps", "wall_time_s", "val_success")}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("csv", nargs="+", type=Path)
+    ap.add_argument("--labels", nargs="*")
+    ap.add_argument("--offsets", nargs="*", type=float, help="seconds to add to each run's wall time (e.g. BC time)")
+    ap.add_argument("-o", "--output", default="training.png")
+    args = ap.parse_args()
+    labels = args.labels or [p.parent.name for p in args.csv]
+    offsets = args.offsets or [0.0] * len(args.csv)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    for path, label, off in zip(args.csv, labels, offsets):
+        d = read(path, off)
+        axes[0].plot([t / 60 for t in d["wall_time_s"]], d["val_success"], marker="o", ms=3, label=label)
+        axes[1].plot([s / 1000 for s in d["env_steps"]], d["val_success"], marker="o", ms=3, label=label)
+    axes[0].set_xlabel("wall time on 2 CPU cores (min)")
+    axes[1].set_xlabel("environment steps (thousands)")
+    for ax in axes:
+        ax.set_ylabel("validation success")
+        ax.set_ylim(0, 1)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(args.output, dpi=130)
+    print(f"wrote {args.output}")
+
+
+if __name__ == "__main__":
+    main()
