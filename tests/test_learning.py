@@ -157,3 +157,19 @@ def test_actor_delay_keeps_the_actor_still() -> None:
     assert all(torch.equal(a, b) for a, b in zip(before, sac.actor.head.parameters()))
     sac.update(buf.sample(32, rng))
     assert not all(torch.equal(a, b) for a, b in zip(before, sac.actor.head.parameters()))
+
+
+def test_training_resumes_from_last_checkpoint(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from pointplan.learning.checkpoint import load_checkpoint
+
+    cfg = TrainConfig(env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, updates_per_step=0.25, eval_every=200, eval_episodes=5, net=SMALL)
+    first = train(cfg, tmp_path / "a", progress=False)
+    state = load_checkpoint(tmp_path / "a" / "last.pt")
+    assert state["trainer"]["steps"] == first.steps == 400
+    resumed = train(replace(cfg, total_steps=600), tmp_path / "b", progress=False, resume=tmp_path / "a" / "last.pt")
+    assert resumed.steps == 600
+    after = load_checkpoint(tmp_path / "b" / "last.pt")["trainer"]
+    assert after["agent"]["updates"] > state["trainer"]["agent"]["updates"]
+    assert after["wall_time_s"] >= state["trainer"]["wall_time_s"]

@@ -135,7 +135,7 @@ def train(
     torch.manual_seed(cfg.seed)
     agent = SAC(robot, env_cfg, obs_shape, cfg.net, cfg.sac, cfg.device)
     steps, best, elapsed_before = 0, -1.0, 0.0
-    if cfg.init_actor:
+    if cfg.init_actor and resume is None:  # a resumed run has its own actor already
         init = load_checkpoint(cfg.init_actor, cfg.device)
         agent.actor.load_state_dict(init["actor"])
     if resume is not None:
