@@ -164,7 +164,9 @@ def test_training_resumes_from_last_checkpoint(tmp_path: Path) -> None:
 
     from pointplan.learning.checkpoint import load_checkpoint
 
-    cfg = TrainConfig(env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, updates_per_step=0.25, eval_every=200, eval_episodes=5, net=SMALL)
+    from pointplan.learning.sac import SACConfig
+
+    cfg = TrainConfig(env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, updates_per_step=0.25, eval_every=200, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32))
     first = train(cfg, tmp_path / "a", progress=False)
     state = load_checkpoint(tmp_path / "a" / "last.pt")
     assert state["trainer"]["steps"] == first.steps == 400
