@@ -169,7 +169,15 @@ def cmd_train(args: argparse.Namespace) -> int:
         from .learning.checkpoint import load_checkpoint
 
         cfg = config_from_dict(load_checkpoint(args.resume)["train_config"])
-        cfg = TrainConfig(**{**cfg.__dict__, "total_steps": args.steps or cfg.total_steps})
+        # settings given on the command line override the run's own; the networks cannot change
+        over: dict[str, object] = {"total_steps": args.steps or cfg.total_steps}
+        for name in ("updates_per_step", "eval_every", "eval_episodes", "target_success", "device"):
+            if getattr(args, name) is not None:
+                over[name] = getattr(args, name)
+        sac_over = {k: getattr(args, k) for k in ("lr", "batch_size") if getattr(args, k) is not None}
+        if sac_over:
+            over["sac"] = SACConfig(**{**cfg.sac.__dict__, **sac_over})
+        cfg = TrainConfig(**{**cfg.__dict__, **over})
     else:
         cfg = TrainConfig(
             env=args.env,
@@ -177,14 +185,14 @@ def cmd_train(args: argparse.Namespace) -> int:
             n_points=args.n_points,
             num_envs=args.num_envs,
             total_steps=args.steps or 200_000,
-            updates_per_step=args.updates_per_step,
-            eval_every=args.eval_every,
-            eval_episodes=args.eval_episodes,
-            target_success=args.target_success,
+            updates_per_step=0.25 if args.updates_per_step is None else args.updates_per_step,
+            eval_every=args.eval_every or 10_000,
+            eval_episodes=args.eval_episodes or 100,
+            target_success=1.01 if args.target_success is None else args.target_success,
             seed=args.seed,
-            device=args.device,
+            device=args.device or "cpu",
             net=_net_config(args),
-            sac=SACConfig(batch_size=args.batch_size, init_alpha=args.init_alpha, actor_delay=args.actor_delay),
+            sac=SACConfig(batch_size=args.batch_size or 256, lr=args.lr or 3e-4, init_alpha=args.init_alpha, actor_delay=args.actor_delay),
             init_actor=args.init_actor,
         )
     res = train(cfg, args.run_dir, progress=not args.quiet, resume=args.resume)
@@ -259,11 +267,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_net(p)
     p.add_argument("--steps", type=int, help="environment steps to collect (default: 200000)")
     p.add_argument("--num-envs", type=int, default=16, help="workspaces stepping together")
-    p.add_argument("--updates-per-step", type=float, default=0.25, help="gradient steps per env step")
-    p.add_argument("--batch-size", type=int, default=256)
-    p.add_argument("--eval-every", type=int, default=10000)
-    p.add_argument("--eval-episodes", type=int, default=100)
-    p.add_argument("--target-success", type=float, default=1.01, help="stop once validation success reaches this")
+    p.add_argument("--updates-per-step", type=float, help="gradient steps per env step (default: 0.25)")
+    p.add_argument("--batch-size", type=int, help="default: 256")
+    p.add_argument("--lr", type=float, help="Adam step size of actor, critics and temperature (default: 3e-4)")
+    p.add_argument("--eval-every", type=int, help="env steps between validation runs (default: 10000)")
+    p.add_argument("--eval-episodes", type=int, help="validation problems (default: 100)")
+    p.add_argument("--target-success", type=float, help="stop once validation success reaches this")
     p.add_argument("--init-actor", help="start the actor from this checkpoint (e.g. a BC one)")
     p.add_argument("--init-alpha", type=float, default=1.0, help="initial entropy temperature (default: %(default)s)")
     p.add_argument("--actor-delay", type=int, default=0, help="critic-only updates before the actor moves (default: %(default)s)")

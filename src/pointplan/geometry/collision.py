@@ -7,8 +7,9 @@ query ``(E, M, ...)`` is answered for every scene at once with no Python loop ov
 configurations or obstacles.
 
 Robot bodies are unions of spheres and oriented boxes. Pairs handled in closed form:
-sphere vs {box, sphere, capsule, cylinder, points} in 2D and 3D, box vs {box (separating
-axis test), sphere, points} in 3D. Meshes, and box vs capsule/cylinder, go through coal.
+sphere vs {box, sphere, capsule, cylinder, cone, points} in 2D and 3D, box vs {box
+(separating axis test), sphere, points} in 3D. Meshes, and box vs capsule/cylinder/cone, go
+through coal.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from .shapes import Box, Capsule, Cylinder, Mesh, PointCloud, Shape, Sphere
+from .shapes import Box, Capsule, Cone, Cylinder, Mesh, PointCloud, Shape, Sphere
 
 Array = NDArray[np.float64]
 Bool = NDArray[np.bool_]
@@ -72,6 +73,32 @@ def point_cylinder_sqdist(c: Array, cc: Array, cr: Array, rad: Array, half: Arra
     dr = np.maximum(rho - rad[..., None, :], 0.0)
     dz = np.maximum(np.abs(local[..., 2]) - half[..., None, :], 0.0)
     return dr * dr + dz * dz
+
+
+def _segment2_sqdist(px: Array, pz: Array, ax: Array, az: Array, bx: Array, bz: Array) -> Array:
+    """Squared distance from 2D points ``(px, pz)`` to segments ``a -> b`` (broadcast)."""
+    ux, uz = bx - ax, bz - az
+    t = np.clip(((px - ax) * ux + (pz - az) * uz) / np.maximum(ux * ux + uz * uz, 1e-18), 0.0, 1.0)
+    dx, dz = px - ax - t * ux, pz - az - t * uz
+    return dx * dx + dz * dz
+
+
+def point_cone_sqdist(c: Array, cc: Array, cr: Array, rad: Array, half: Array) -> Array:
+    """Squared distance from points ``(..., M, 3)`` to solid cones ``(..., K, ...)`` (base at
+    local ``z = -half``, apex at ``z = +half``). The cone is the revolution of the triangle
+    (0, -h), (R, -h), (0, h) in the (rho, z) half-plane, so the 3D distance is the 2D distance
+    to that triangle."""
+    diff = c[..., :, None, :] - cc[..., None, :, :]
+    local = np.einsum("...kji,...mkj->...mki", cr, diff)
+    rho = np.linalg.norm(local[..., :2], axis=-1)
+    z = local[..., 2]
+    r = np.broadcast_to(rad[..., None, :], rho.shape)
+    h = np.broadcast_to(half[..., None, :], rho.shape)
+    inside = (z >= -h) & (z <= h) & (rho * 2.0 * h <= r * (h - z))
+    zero = np.zeros_like(rho)
+    d_base = _segment2_sqdist(rho, z, zero, -h, r, -h)
+    d_side = _segment2_sqdist(rho, z, r, -h, zero, h)
+    return np.where(inside, 0.0, np.minimum(d_base, d_side))
 
 
 def obb_overlap(ca: Array, ra: Array, ha: Array, cb: Array, rb: Array, hb: Array) -> Bool:
@@ -152,6 +179,10 @@ class CollisionWorld:
     cyl_r: Array
     cyl_rad: Array
     cyl_half: Array
+    con_c: Array = field(default_factory=lambda: np.zeros((0, 3)))
+    con_r: Array = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    con_rad: Array = field(default_factory=lambda: np.zeros(0))
+    con_half: Array = field(default_factory=lambda: np.zeros(0))
     #: per scene: point clouds (merged) as a KD-tree, or None
     cloud_trees: list[cKDTree | None] = field(default_factory=list)
     #: per scene: coal collision objects of meshes (and primitives coal must handle)
@@ -173,13 +204,14 @@ class CollisionWorld:
         spheres = [s for s in shapes if isinstance(s, Sphere)]
         caps = [s for s in shapes if isinstance(s, Capsule)]
         cyls = [s for s in shapes if isinstance(s, Cylinder)]
+        cones = [s for s in shapes if isinstance(s, Cone)]
         meshes = [s for s in shapes if isinstance(s, Mesh)]
         clouds = [s for s in shapes if isinstance(s, PointCloud)]
         for s in shapes:
             if s.dim != dim:
                 raise ValueError(f"{type(s).__name__} is {s.dim}D in a {dim}D scene")
-        if dim == 2 and (cyls or meshes):
-            raise ValueError("cylinders and meshes are 3D shapes")
+        if dim == 2 and (cyls or meshes or cones):
+            raise ValueError("cylinders, cones and meshes are 3D shapes")
         d = dim
 
         def arr(xs: list[Array], shape: tuple[int, ...]) -> Array:
@@ -203,9 +235,13 @@ class CollisionWorld:
             cyl_r=arr([c.rotation for c in cyls], (3, 3)) if d == 3 else np.zeros((0, 3, 3)),
             cyl_rad=np.array([c.radius for c in cyls], dtype=np.float64),
             cyl_half=np.array([c.length / 2 for c in cyls], dtype=np.float64),
+            con_c=arr([c.center for c in cones], (3,)) if d == 3 else np.zeros((0, 3)),
+            con_r=arr([c.rotation for c in cones], (3, 3)) if d == 3 else np.zeros((0, 3, 3)),
+            con_rad=np.array([c.radius for c in cones], dtype=np.float64),
+            con_half=np.array([c.length / 2 for c in cones], dtype=np.float64),
             cloud_trees=[tree],
             coal_objects=[coal_objs],
-            shapes=[list(caps) + list(cyls)],
+            shapes=[list(caps) + list(cyls) + list(cones)],
             meshes=[list(meshes)],
         )
 
@@ -242,6 +278,10 @@ class CollisionWorld:
             cyl_r=pad("cyl_r", np.eye(3)),
             cyl_rad=pad("cyl_rad", np.zeros(())),
             cyl_half=pad("cyl_half", np.zeros(())),
+            con_c=pad("con_c", np.full(3, _FAR)),
+            con_r=pad("con_r", np.eye(3)),
+            con_rad=pad("con_rad", np.zeros(())),
+            con_half=pad("con_half", np.zeros(())),
             cloud_trees=[w.cloud_trees[0] for w in worlds],
             coal_objects=[w.coal_objects[0] for w in worlds],
             shapes=[w.shapes[0] for w in worlds],
@@ -272,6 +312,8 @@ class CollisionWorld:
         if self.dim == 3 and self.cyl_c.shape[-2]:
             d2 = point_cylinder_sqdist(c, self.cyl_c, self.cyl_r, self.cyl_rad, self.cyl_half)
             hit |= np.any(d2 <= r2, -1)
+        if self.dim == 3 and self.con_c.shape[-2]:
+            hit |= np.any(point_cone_sqdist(c, self.con_c, self.con_r, self.con_rad, self.con_half) <= r2, -1)
         hit |= self._spheres_vs_clouds(c, r)
         hit |= self._coal_query(c, r, kind="sphere", meshes_only=True)
         return hit
@@ -418,6 +460,8 @@ def _coal_primitive(s: Shape) -> tuple[Any, Any]:
         return coal.Capsule(s.radius, length), _coal_tf(_rotation_to_z(axis), (s.a + s.b) / 2)
     if isinstance(s, Cylinder):
         return coal.Cylinder(s.radius, s.length), _coal_tf(s.rotation, s.center)
+    if isinstance(s, Cone):
+        return coal.Cone(s.radius, s.length), _coal_tf(s.rotation, s.center)
     raise TypeError(f"no coal fallback for {type(s).__name__}")
 
 

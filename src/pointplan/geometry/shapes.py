@@ -105,6 +105,28 @@ class Cylinder:
 
 
 @dataclass(frozen=True)
+class Cone:
+    """Solid right circular cone (3D only) around the local z axis of ``rotation``: base disc
+    of ``radius`` at ``z = -length/2``, apex at ``z = +length/2`` (coal's convention)."""
+
+    center: Array
+    radius: float
+    length: float
+    rotation: Array = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "center", _vec(self.center, 3))
+        object.__setattr__(self, "radius", float(self.radius))
+        object.__setattr__(self, "length", float(self.length))
+        rot = np.eye(3) if self.rotation is None else np.asarray(self.rotation, np.float64)
+        object.__setattr__(self, "rotation", rot.reshape(3, 3))
+
+    @property
+    def dim(self) -> int:
+        return 3
+
+
+@dataclass(frozen=True)
 class Mesh:
     """Triangle mesh in the world frame (3D only): ``vertices: (V, 3)``, ``faces: (F, 3)``."""
 
@@ -150,4 +172,4 @@ class PointCloud:
         return int(self.points.shape[1])
 
 
-Shape = Union[Box, Sphere, Capsule, Cylinder, Mesh, PointCloud]
+Shape = Union[Box, Sphere, Capsule, Cylinder, Cone, Mesh, PointCloud]

@@ -155,6 +155,12 @@ class SAC:
             "updates": self.updates,
         }
 
+    def set_lr(self, lr: float) -> None:
+        """Change the Adam step size of every optimiser (e.g. when resuming a run)."""
+        for opt in (self.actor_opt, self.critic_opt, self.alpha_opt):
+            for group in opt.param_groups:
+                group["lr"] = lr
+
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.actor.load_state_dict(state["actor"])
         self.critic.load_state_dict(state["critic"])

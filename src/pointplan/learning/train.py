@@ -134,7 +134,7 @@ def train(
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     agent = SAC(robot, env_cfg, obs_shape, cfg.net, cfg.sac, cfg.device)
-    steps, best, elapsed_before = 0, -1.0, 0.0
+    steps, best, best_nodes, elapsed_before = 0, -1.0, float("inf"), 0.0
     if cfg.init_actor and resume is None:  # a resumed run has its own actor already
         init = load_checkpoint(cfg.init_actor, cfg.device)
         agent.actor.load_state_dict(init["actor"])
@@ -143,9 +143,15 @@ def train(
         agent.load_state_dict(state["trainer"]["agent"])
         steps = int(state["trainer"]["steps"])
         best = float(state["trainer"]["best"])
+        best_nodes = float(state["trainer"].get("best_nodes", float("inf")))
         elapsed_before = float(state["trainer"]["wall_time_s"])
         rng.bit_generator.state = state["trainer"]["rng"]
         torch.set_rng_state(state["trainer"]["torch_rng"])
+        before = config_from_dict(state["train_config"])
+        if before.sac.lr != cfg.sac.lr:
+            agent.set_lr(cfg.sac.lr)
+        if (before.eval_episodes, before.seed) != (cfg.eval_episodes, cfg.seed):
+            best, best_nodes = -1.0, float("inf")  # another validation set: not comparable
     capacity = int(min(cfg.sac.buffer_size, max(cfg.total_steps, 10_000)))
     buffer = EpisodeReplay(capacity, obs_shape, robot.config_dim, robot.twist_dim)
     val_problems = scenario.problems("val", cfg.eval_episodes, seed=cfg.seed)
@@ -213,6 +219,9 @@ def train(
             res = rollout_batch(lambda o, qq, g: agent.act(o, qq, g, deterministic=True), robot, env_cfg, val_problems, scenario.horizon, seed=cfg.seed)
             agent.actor.train()
             val = float(np.mean([r.success for r in res]))
+            nodes_all = float(np.mean([r.nodes for r in res]))
+            # the best checkpoint: highest validation success, then fewest steps
+            improved = val > best or (val == best and nodes_all < best_nodes)
             wall = elapsed_before + time.perf_counter() - t_start
             row = {
                 "env_steps": float(steps),
@@ -231,14 +240,15 @@ def train(
                 "agent": agent.state_dict(),
                 "steps": steps,
                 "best": max(best, val),
+                "best_nodes": nodes_all if improved else best_nodes,
                 "wall_time_s": wall,
                 "rng": rng.bit_generator.state,
                 "torch_rng": torch.get_rng_state(),
             }
             extra = {"env_steps": steps, "val_success": val, "wall_time_s": wall, "horizon": core.horizon}
             save_checkpoint(run_dir / "last.pt", {**_checkpoint_payload(cfg, agent, obs_shape, robot.name, extra), "trainer": trainer_state})
-            if val > best:
-                best = val
+            if improved:
+                best, best_nodes = val, nodes_all
                 save_checkpoint(run_dir / "best.pt", _checkpoint_payload(cfg, agent, obs_shape, robot.name, extra))
             if bar is not None:
                 bar.write(f"step {steps}: val success {val:.3f} (best {best:.3f}), {wall:.0f} s")
