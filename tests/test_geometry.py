@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from pointplan.envs.core import q_free
 from pointplan.geometry import lie
 from pointplan.geometry.collision import CollisionWorld
-from pointplan.geometry.shapes import Box, Capsule, Cylinder, Mesh, PointCloud, Sphere
+from pointplan.geometry.shapes import Box, Capsule, Cone, Cylinder, Mesh, PointCloud, Sphere
 from pointplan.robots import Disc2D, SShape
 from pointplan.scenes import narrow2d
 
@@ -81,6 +81,8 @@ def coal_obstacle(s) -> tuple[object, coal.Transform3s]:
         return coal.Capsule(s.radius, float(np.linalg.norm(b - a))), tf(z_to(b - a), (a + b) / 2)
     if isinstance(s, Cylinder):
         return coal.Cylinder(s.radius, s.length), tf(s.rotation, s.center)
+    if isinstance(s, Cone):
+        return coal.Cone(s.radius, s.length), tf(s.rotation, s.center)
     raise TypeError(type(s))
 
 
@@ -99,6 +101,8 @@ def random_obstacles(rng: np.random.Generator, kind: str, dim: int, n: int) -> l
             out.append(Capsule(c - d / 2, c + d / 2, rng.uniform(0.03, 0.2)))
         elif kind == "cylinder":
             out.append(Cylinder(c, rng.uniform(0.03, 0.3), rng.uniform(0.05, 0.6), lie.random_rotations(rng, 1)[0]))
+        elif kind == "cone":
+            out.append(Cone(c, rng.uniform(0.03, 0.3), rng.uniform(0.05, 0.6), lie.random_rotations(rng, 1)[0]))
         else:
             raise ValueError(kind)
     return out
@@ -345,7 +349,7 @@ def test_disc_2d_vs_coal(kind: str, seed: int) -> None:
     check_spheres(obstacles, centers, radii)
 
 
-@pytest.mark.parametrize("kind", ["box", "sphere", "capsule", "cylinder"])
+@pytest.mark.parametrize("kind", ["box", "sphere", "capsule", "cylinder", "cone"])
 @given(seed=seeds)
 @fast
 def test_sphere_3d_vs_coal(kind: str, seed: int) -> None:
@@ -359,12 +363,12 @@ def test_sphere_3d_vs_coal(kind: str, seed: int) -> None:
 def test_oracle_cases_are_mixed() -> None:
     """The random cases above are not all hits or all misses."""
     rng = np.random.default_rng(0)
-    for kind in ["box", "sphere", "capsule", "cylinder"]:
+    for kind in ["box", "sphere", "capsule", "cylinder", "cone"]:
         hits = check_spheres(random_obstacles(rng, kind, 3, 4), rng.uniform(-0.8, 0.8, (200, 3)), rng.uniform(0.005, 0.25, 200))
         assert 20 < hits < 180, (kind, hits)
 
 
-@pytest.mark.parametrize("kind", ["box", "sphere", "capsule", "cylinder"])
+@pytest.mark.parametrize("kind", ["box", "sphere", "capsule", "cylinder", "cone"])
 @given(seed=seeds)
 @fast
 def test_box_3d_vs_coal(kind: str, seed: int) -> None:
@@ -405,7 +409,7 @@ def sshape_coal_parts(robot: SShape, q: np.ndarray) -> list[tuple[object, coal.T
     ]
 
 
-@pytest.mark.parametrize("kind", ["box", "sphere", "capsule"])
+@pytest.mark.parametrize("kind", ["box", "sphere", "capsule", "cylinder", "cone"])
 @given(seed=seeds)
 @settings(max_examples=15, deadline=None)
 def test_sshape_vs_coal(kind: str, seed: int) -> None:

@@ -175,3 +175,26 @@ def test_training_resumes_from_last_checkpoint(tmp_path: Path) -> None:
     after = load_checkpoint(tmp_path / "b" / "last.pt")["trainer"]
     assert after["agent"]["updates"] > state["trainer"]["agent"]["updates"]
     assert after["wall_time_s"] >= state["trainer"]["wall_time_s"]
+
+
+def test_shipped_policy_loads_and_solves_fixed_problems() -> None:
+    """The 2D-Narrow policy inside the package plans unseen test problems; its paths pass the
+    evaluator's independent check and it refuses a robot it was not trained for."""
+    from pointplan.evaluation.evaluate import check_path
+    from pointplan.models.policy import Policy, shipped_checkpoint
+    from pointplan.planners import make_planner
+    from pointplan.scenes.scenarios import make_scenario
+
+    path = shipped_checkpoint("narrow2d")
+    assert path.stat().st_size < 2_000_000
+    policy = Policy.from_checkpoint(path)
+    assert policy.observation == "surface-normals" and policy.robot.name == "disc2d"
+    scenario = make_scenario("narrow2d")
+    planner = make_planner("policy", scenario.robot)  # no checkpoint: the shipped one
+    problems = scenario.problems("test", 12, seed=0)
+    results = planner.plan_many(problems)
+    solved = [check_path(scenario.robot, p, r.path) for p, r in zip(problems, results)]
+    assert sum(solved) >= 10, solved
+    assert all(r.success == ok for r, ok in zip(results, solved))
+    with pytest.raises(ValueError, match="no policy ships"):
+        make_planner("policy", make_scenario("boxes3d").robot)

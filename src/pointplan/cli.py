@@ -31,7 +31,7 @@ def _scenario(args: argparse.Namespace) -> Any:
             raise CLIError(f"robot {robot_name} is {robot.dim}D but the scene is {sf.scene.dim}D")
         return FixedScenario(sf.scene, robot, fixed=sf.problems)
     try:
-        return make_scenario(args.env)
+        return make_scenario(args.env, robot=getattr(args, "robot", None))
     except ValueError as e:
         raise CLIError(str(e)) from None
 
@@ -58,9 +58,9 @@ def _write_json(path: str | None, payload: dict[str, Any]) -> None:
 
 
 def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> None:
-    p.add_argument("--env", default="narrow2d", help="scenario (default: narrow2d)")
+    p.add_argument("--env", default="narrow2d", help="scenario: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d (default: narrow2d)")
     p.add_argument("--scene", help="plan on a scene file (JSON, see docs/scenes.md) instead of --env")
-    p.add_argument("--robot", help="robot for a scene file that names none (disc2d, sphere3d, sshape)")
+    p.add_argument("--robot", help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot), or the robot of a scene file that names none")
     p.add_argument("--planner", default=planner_default, help="birrt, straight or policy (default: %(default)s)")
     p.add_argument("--checkpoint", help="trained policy for --planner policy")
     p.add_argument("--max-nodes", type=int, default=20000, help="Bi-RRT node budget (default: %(default)s)")
@@ -135,17 +135,23 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     scenario = Narrow2DScenario()
     robot = scenario.robot
-    print(f"2D-Narrow: {args.episodes} test problems (unseen workspaces)")
+    print(f"2D-Narrow: {args.episodes} test problems (workspaces never seen in training)")
     problems = scenario.problems("test", args.episodes, seed=0)
-    planners = {"birrt": make_planner("birrt", robot, seed=0), "straight": make_planner("straight", robot)}
+    planners = {
+        "policy": make_planner("policy", robot, checkpoint=args.checkpoint or "shipped"),
+        "birrt": make_planner("birrt", robot, seed=0),
+        "straight": make_planner("straight", robot),
+    }
     metrics, reports = {}, {}
     for name, planner in planners.items():
         reports[name] = evaluate(planner, problems, robot, progress=not args.quiet)
         metrics[name] = reports[name].metrics()
     print(format_table(metrics))
-    shown = problems[: args.figures]
-    results = [planners["birrt"].plan(p) for p in shown]
-    render_grid(shown, results, args.output, robot, titles=[f"{p.tag}  nodes={r.nodes}" for p, r in zip(shown, results)])
+    # a few problems the policy solved, drawn with its paths
+    solved = [i for i, r in enumerate(reports["policy"].records) if r.success][: args.figures]
+    shown = [problems[i] for i in solved]
+    results = [planners["policy"].plan(p) for p in shown]
+    render_grid(shown, results, args.output, robot, titles=[f"{p.tag.split('/', 1)[-1]}  {r.nodes} steps" for p, r in zip(shown, results)])
     print(f"wrote {args.output}")
     return 0
 
@@ -286,7 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_bc)
 
     p = sub.add_parser("demo", help="plan 2D-Narrow test problems and draw a few")
-    p.add_argument("--episodes", type=int, default=100, help="test problems (default: %(default)s)")
+    p.add_argument("--episodes", type=int, default=400, help="test problems (default: %(default)s)")
+    p.add_argument("--checkpoint", help="policy to show (default: the 2D-Narrow policy that ships with pointplan)")
     p.add_argument("--figures", type=int, default=8, help="problems drawn (default: %(default)s)")
     p.add_argument("-o", "--output", default="demo.png", help="figure (default: %(default)s)")
     p.add_argument("--quiet", action="store_true")

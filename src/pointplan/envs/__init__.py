@@ -9,7 +9,28 @@ import gymnasium as gym
 from .core import BatchedCore, EnvConfig, q_free
 from .planning_env import PlanningEnv, PlanningVectorEnv
 
-ENV_IDS = {"narrow2d": "pointplan/Narrow2D-v0"}
+#: scenario name -> Gymnasium id. Settings are keyword arguments of ``gymnasium.make``:
+#: ``robot`` (3D ids: ``sphere3d`` or ``sshape``), and the fields of :class:`EnvConfig`
+#: (``observation``, ``n_points``, ``split``, ``horizon``, ...).
+ENV_IDS = {
+    "narrow2d": "pointplan/Narrow2D-v0",
+    "boxes3d": "pointplan/Boxes3D-v0",
+    "synthetic3d": "pointplan/Synthetic3D-v0",
+    "ycb3d": "pointplan/YCB3D-v0",
+    "dynamic3d": "pointplan/Dynamic3D-v0",
+    "slot": "pointplan/Slot-v0",
+    "qureshi3d": "pointplan/Qureshi3D-v0",
+}
+
+
+def make_env(scenario: str, **kwargs: Any) -> PlanningEnv:
+    """The single environment of a scenario (Gymnasium entry point)."""
+    return PlanningEnv(scenario, **kwargs)
+
+
+def make_vector_env(scenario: str, num_envs: int = 16, **kwargs: Any) -> PlanningVectorEnv:
+    """The batched vector environment of a scenario (Gymnasium vector entry point)."""
+    return PlanningVectorEnv(scenario, num_envs=num_envs, **kwargs)
 
 
 def make_narrow2d(**kwargs: Any) -> PlanningEnv:
@@ -22,13 +43,17 @@ def make_narrow2d_vector(num_envs: int = 16, **kwargs: Any) -> PlanningVectorEnv
 
 def register_envs() -> None:
     """Register the package's ids with Gymnasium (done on import of ``pointplan``)."""
-    if "pointplan/Narrow2D-v0" not in gym.registry:
+    from functools import partial
+
+    for name, env_id in ENV_IDS.items():
+        if env_id in gym.registry:
+            continue
         gym.register(
-            id="pointplan/Narrow2D-v0",
-            entry_point="pointplan.envs:make_narrow2d",
-            vector_entry_point="pointplan.envs:make_narrow2d_vector",
+            id=env_id,
+            entry_point=partial(make_env, name),  # type: ignore[arg-type]
+            vector_entry_point=partial(make_vector_env, name),  # type: ignore[arg-type]
             max_episode_steps=None,
         )
 
 
-__all__ = ["BatchedCore", "EnvConfig", "PlanningEnv", "PlanningVectorEnv", "q_free", "register_envs", "ENV_IDS"]
+__all__ = ["BatchedCore", "EnvConfig", "PlanningEnv", "PlanningVectorEnv", "q_free", "register_envs", "make_env", "make_vector_env", "ENV_IDS"]

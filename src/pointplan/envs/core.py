@@ -26,10 +26,12 @@ Bool = NDArray[np.bool_]
 class EnvConfig:
     """Settings of a planning environment (keyword arguments of ``gymnasium.make``)."""
 
-    #: observation type: ``surface``, ``surface-normals``, ``interior``, ``image``
-    observation: str = "surface-normals"
-    #: number of observed points (point observers)
-    n_points: int = 64
+    #: observation type: ``surface``, ``surface-normals``, ``interior``, ``image`` (2D);
+    #: ``global``, ``local`` (3D); ``None`` takes the scenario's default
+    observation: str | None = None
+    #: number of observed points (point observers); ``None`` takes the observer's default
+    #: (64; 256 for ``global``)
+    n_points: int | None = None
     #: ``train``, ``val`` (held out for model selection) or ``test`` workspaces
     split: str = "train"
     #: episode length; ``None`` takes the scenario's (50 for 2D-Narrow)
@@ -91,10 +93,12 @@ class BatchedCore:
         self.config = config
         self.num_envs = int(num_envs)
         self.horizon = int(config.horizon or scenario.horizon)
+        observation = config.observation or ("surface-normals" if self.robot.dim == 2 else "global")
         kwargs: dict[str, Any] = {}
-        if config.observation != "image":
+        if observation != "image" and config.n_points is not None:
             kwargs["n_points"] = config.n_points
-        self.observer = make_observer(config.observation, self.robot, **kwargs)
+        self.observer = make_observer(observation, self.robot, **kwargs)
+        self.observation = observation
         e, c = self.num_envs, self.robot.config_dim
         self.q = np.zeros((e, c))
         self.goal = np.zeros((e, c))
@@ -132,6 +136,7 @@ class BatchedCore:
 
     @property
     def world(self) -> CollisionWorld:
+        """The stacked obstacles of the ``E`` scenes (static scenes)."""
         if self._world is None:
             scenes = [s for s in self.scenes if s is not None]
             if len(scenes) != self.num_envs:
@@ -139,10 +144,19 @@ class BatchedCore:
             self._world = CollisionWorld.stack([s.world for s in scenes])
         return self._world
 
+    def world_at(self, t: NDArray[np.int64]) -> CollisionWorld:
+        """The stacked obstacles with each environment's scene at its own time ``t[i]``."""
+        scenes = [s for s in self.scenes if s is not None]
+        if not any(s.dynamic for s in scenes):
+            return self.world
+        if len(scenes) != self.num_envs:
+            raise RuntimeError("reset every environment before stepping")
+        return CollisionWorld.stack([s.world_at(int(ti)) for s, ti in zip(scenes, t)])
+
     # ------------------------------------------------------------------ step
     def observe(self, rng: np.random.Generator) -> dict[str, NDArray[np.float32]]:
         return {
-            "observation": self.observer.observe(self.q, rng),
+            "observation": self.observer.observe(self.q, rng, self.t),
             "achieved_goal": self.q.astype(np.float32),
             "desired_goal": self.goal.astype(np.float32),
         }
@@ -160,7 +174,8 @@ class BatchedCore:
         truncated and per-environment info arrays. Observations come from ``observe``."""
         a = np.clip(np.asarray(actions, np.float64).reshape(self.num_envs, self.robot.twist_dim), -1.0, 1.0)
         twist = a * self.robot.action_scale
-        self.q, collided, checks = q_free(self.robot, self.world, self.q, twist, self.low, self.high, self.config.substep)
+        # a move from step t to t + 1 is checked against the obstacles at t + 1
+        self.q, collided, checks = q_free(self.robot, self.world_at(self.t + 1), self.q, twist, self.low, self.high, self.config.substep)
         self.t += 1
         success = self.success(self.q, self.goal, collided)
         action_norm = np.linalg.norm(a, axis=-1)

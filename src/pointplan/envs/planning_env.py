@@ -15,8 +15,12 @@ from ..scenes.scene import Problem
 from .core import Array, BatchedCore, EnvConfig
 
 
-def _resolve(scenario: str | Scenario) -> Scenario:
-    return make_scenario(scenario) if isinstance(scenario, str) else scenario
+def _resolve(scenario: str | Scenario, robot: str | None = None) -> Scenario:
+    if isinstance(scenario, str):
+        return make_scenario(scenario, robot=robot)
+    if robot is not None and robot != scenario.robot.name:
+        raise ValueError(f"robot={robot!r} conflicts with the scenario's robot {scenario.robot.name!r}")
+    return scenario
 
 
 def _goal_space(core: BatchedCore) -> spaces.Box:
@@ -59,9 +63,9 @@ class PlanningEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, scenario: str | Scenario = "narrow2d", render_mode: str | None = None, **settings: Any) -> None:
+    def __init__(self, scenario: str | Scenario = "narrow2d", render_mode: str | None = None, robot: str | None = None, **settings: Any) -> None:
         self.config = EnvConfig(**settings)
-        self.core = BatchedCore(_resolve(scenario), 1, self.config)
+        self.core = BatchedCore(_resolve(scenario, robot), 1, self.config)
         self.robot = self.core.robot
         self.render_mode = render_mode
         self.observation_space = spaces.Dict(
@@ -124,9 +128,9 @@ class PlanningVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.flo
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
 
-    def __init__(self, scenario: str | Scenario = "narrow2d", num_envs: int = 16, **settings: Any) -> None:
+    def __init__(self, scenario: str | Scenario = "narrow2d", num_envs: int = 16, robot: str | None = None, **settings: Any) -> None:
         self.config = EnvConfig(**settings)
-        self.core = BatchedCore(_resolve(scenario), num_envs, self.config)
+        self.core = BatchedCore(_resolve(scenario, robot), num_envs, self.config)
         self.robot = self.core.robot
         self.num_envs = int(num_envs)
         self.single_observation_space = spaces.Dict(

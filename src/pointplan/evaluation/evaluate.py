@@ -31,6 +31,10 @@ def check_path(robot: Robot, problem: Problem, path: Array, resolution: float = 
     in the environment), and every geodesic segment between consecutive configurations,
     checked at configurations at most ``resolution`` apart (both ends included), must be
     collision-free with every position inside the scene bounds.
+
+    In a scene whose obstacles move, the path is executed in time: it is cut into moves one
+    action can make (:func:`timed_path`), move ``j`` takes the robot from time ``j`` to
+    ``j + 1`` and is checked against the obstacles at time ``j + 1``, as in the environment.
     """
     path = np.asarray(path, np.float64)
     if path.ndim != 2 or path.shape[0] < 1 or path.shape[1] != robot.config_dim:
@@ -46,7 +50,28 @@ def check_path(robot: Robot, problem: Problem, path: Array, resolution: float = 
     pos = robot.positions(qs)
     if np.any(pos < scene.low - _BOUNDS_EPS) or np.any(pos > scene.high + _BOUNDS_EPS):
         return False
+    if scene.dynamic:
+        timed = timed_path(robot, path)
+        for j in range(len(timed) - 1):
+            seg = densify(robot, timed[j : j + 2], resolution)[1:]
+            if bool(np.any(robot.collides(scene.world_at(j + 1), seg))):
+                return False
+        return True
     return not bool(np.any(robot.collides(scene.world, qs)))
+
+
+def timed_path(robot: Robot, path: Array) -> Array:
+    """``path`` with every segment cut into equal pieces that one action can make (each
+    twist coordinate within the robot's ``action_scale``): one piece per time step."""
+    path = np.asarray(path, np.float64)
+    if len(path) < 2:
+        return path.copy()
+    out = [path[:1]]
+    for q0, q1 in zip(path[:-1], path[1:]):
+        v = robot.log(q0, q1)
+        k = max(1, int(np.ceil(float(np.max(np.abs(v) / robot.action_scale)) - 1e-9)))
+        out.append(robot.integrate(np.broadcast_to(q0, (k, len(q0))), v[None] * (np.arange(1, k + 1) / k)[:, None]))
+    return np.concatenate(out)
 
 
 def densify(robot: Robot, path: Array, resolution: float) -> Array:

@@ -365,50 +365,85 @@ class CollisionWorld:
         return out
 
     def _coal_query(self, q: Any, r: Array | None, kind: str, meshes_only: bool) -> Bool:
-        """Slow path through coal, one configuration at a time (meshes and rare pairs)."""
+        """Slow path through coal, one pair at a time (meshes and rare pairs), after a
+        bounding-sphere filter: only pairs whose bounding spheres meet are handed to coal."""
         if kind == "sphere":
             c = q
-            shape = c.shape[:-1]
         else:
             c, rot, h = q
-            shape = c.shape[:-1]
+        shape = c.shape[:-1]
         out = np.zeros(shape, dtype=bool)
         scenes = range(1) if self.batch_shape == () else range(self.batch_shape[0])
         for i in scenes:
-            objs = list(self.coal_objects[i])
+            meshes = self.meshes[i] if i < len(self.meshes) else []
+            items: list[tuple[Any, Any, Array, float, Mesh | None]] = []
+            for m, (g, tf) in zip(meshes, self.coal_objects[i]):
+                items.append((g, tf, *_bounding_sphere(m), m))
             if not meshes_only:
-                objs += [_coal_primitive(s) for s in self.shapes[i]]
-            if not objs:
+                for sh in self.shapes[i]:
+                    g, tf = _coal_primitive(sh)
+                    items.append((g, tf, *_bounding_sphere(sh), None))
+            if not items:
                 continue
             ci = c if self.batch_shape == () else c[i]
             flat_c = ci.reshape(-1, ci.shape[-1])
-            res = np.zeros(flat_c.shape[0], dtype=bool)
             if kind == "sphere":
                 assert r is not None
-                ri = (r if self.batch_shape == () else r[i]).reshape(-1)
-                for m in range(flat_c.shape[0]):
-                    res[m] = any(
-                        coal_collide_sphere(flat_c[m], ri[m], g, tf) for g, tf in objs
-                    )
-                # coal tests mesh surfaces only; a mesh is solid: a sphere deep inside it,
-                # or a mesh wholly inside the sphere, also collides.
-                for mesh in self.meshes[i] if i < len(self.meshes) else []:
-                    res |= mesh_contains(mesh, flat_c)
-                    res |= np.sum((flat_c - mesh.vertices[0]) ** 2, -1) <= ri * ri
+                reach = (r if self.batch_shape == () else r[i]).reshape(-1)
             else:
                 roti = (rot if self.batch_shape == () else rot[i]).reshape(-1, 3, 3)
                 hi = (h if self.batch_shape == () else h[i]).reshape(-1, 3)
-                for m in range(flat_c.shape[0]):
-                    res[m] = any(coal_collide_box(flat_c[m], roti[m], hi[m], g, tf) for g, tf in objs)
-                for mesh in self.meshes[i] if i < len(self.meshes) else []:  # solid meshes
-                    res |= mesh_contains(mesh, flat_c)
-                    res |= sphere_box_sqdist(mesh.vertices[:1], flat_c, roti, hi)[0] <= 0.0
+                reach = np.linalg.norm(hi, axis=-1)
+            res = np.zeros(flat_c.shape[0], dtype=bool)
+            for g, tf, bc, br, mesh in items:
+                near = np.flatnonzero((np.sum((flat_c - bc) ** 2, -1) <= (reach + br) ** 2) & ~res)
+                if not len(near):
+                    continue
+                if kind == "sphere":
+                    hit = np.array([coal_collide_sphere(flat_c[m], reach[m], g, tf) for m in near], dtype=bool)
+                else:
+                    hit = np.array([coal_collide_box(flat_c[m], roti[m], hi[m], g, tf) for m in near], dtype=bool)
+                if mesh is not None:
+                    # coal tests mesh surfaces only; a mesh is solid: a body deep inside it,
+                    # or a mesh wholly inside the body, also collides
+                    rest = near[~hit]
+                    if len(rest):
+                        inside = mesh_contains(mesh, flat_c[rest])
+                        if kind == "sphere":
+                            inside |= np.sum((flat_c[rest] - mesh.vertices[0]) ** 2, -1) <= reach[rest] ** 2
+                        else:
+                            inside |= sphere_box_sqdist(mesh.vertices[:1], flat_c[rest], roti[rest], hi[rest])[0] <= 0.0
+                        hit[~hit] = inside
+                res[near] |= hit
             res = res.reshape(ci.shape[:-1])
             if self.batch_shape == ():
                 out |= res
             else:
                 out[i] |= res
         return out
+
+
+_BOUNDS_CACHE: dict[int, tuple[Any, Array, float]] = {}
+
+
+def _bounding_sphere(s: Shape) -> tuple[Array, float]:
+    """A sphere enclosing a capsule, cylinder, cone or mesh (cached per shape object)."""
+    hit = _BOUNDS_CACHE.get(id(s))
+    if hit is not None and hit[0] is s:
+        return hit[1], hit[2]
+    if isinstance(s, Mesh):
+        c = (s.vertices.min(0) + s.vertices.max(0)) / 2
+        r = float(np.sqrt(np.max(np.sum((s.vertices - c) ** 2, -1))))
+    elif isinstance(s, Capsule):
+        c, r = (s.a + s.b) / 2, float(np.linalg.norm(s.b - s.a) / 2 + s.radius)
+    elif isinstance(s, (Cylinder, Cone)):
+        c, r = s.center, float(np.hypot(s.radius, s.length / 2))
+    else:
+        raise TypeError(f"no bounding sphere for {type(s).__name__}")
+    if len(_BOUNDS_CACHE) > 100_000:
+        _BOUNDS_CACHE.clear()
+    _BOUNDS_CACHE[id(s)] = (s, c, r)
+    return c, r
 
 
 # ---------------------------------------------------------------------------- coal glue

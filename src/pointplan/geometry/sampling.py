@@ -7,7 +7,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from .shapes import Box, PointCloud, Shape, Sphere
+from .shapes import Box, Capsule, Cone, Cylinder, Mesh, PointCloud, Shape, Sphere
 
 Array = NDArray[np.float64]
 
@@ -135,3 +135,133 @@ def interior_points(shapes: Sequence[Shape], spacing: float, low: Array, high: A
         else:
             raise NotImplementedError(f"interior sampling of {type(s).__name__} is not implemented yet")
     return grid[inside]
+
+
+# ------------------------------------------------------------------ area-weighted (3D)
+def shape_to_trimesh(s: Shape, sections: int = 32) -> "trimesh.Trimesh":  # type: ignore[name-defined]  # noqa: F821
+    """A triangle mesh of a 3D shape in the world frame (primitives tessellated)."""
+    import trimesh
+
+    if isinstance(s, Box):
+        m = trimesh.creation.box(extents=s.size)
+        tf = np.eye(4)
+        tf[:3, :3], tf[:3, 3] = s.rotation, s.center
+    elif isinstance(s, Sphere):
+        m = trimesh.creation.icosphere(subdivisions=3, radius=s.radius)
+        tf = np.eye(4)
+        tf[:3, 3] = s.center
+    elif isinstance(s, Capsule):
+        from .collision import _rotation_to_z
+
+        axis = s.b - s.a
+        m = trimesh.creation.capsule(height=float(np.linalg.norm(axis)), radius=s.radius, count=[sections, sections])
+        tf = np.eye(4)
+        tf[:3, :3], tf[:3, 3] = _rotation_to_z(axis), (s.a + s.b) / 2
+    elif isinstance(s, Cylinder):
+        m = trimesh.creation.cylinder(radius=s.radius, height=s.length, sections=sections)
+        tf = np.eye(4)
+        tf[:3, :3], tf[:3, 3] = s.rotation, s.center
+    elif isinstance(s, Cone):
+        m = trimesh.creation.cone(radius=s.radius, height=s.length, sections=sections)
+        m.apply_translation([0.0, 0.0, -s.length / 2])  # trimesh puts the base at z = 0
+        tf = np.eye(4)
+        tf[:3, :3], tf[:3, 3] = s.rotation, s.center
+    elif isinstance(s, Mesh):
+        return trimesh.Trimesh(s.vertices, s.faces, process=False)
+    else:
+        raise TypeError(f"no mesh for {type(s).__name__}")
+    m.apply_transform(tf)
+    return m
+
+
+def _box_area_samples(box: Box, n: int, rng: np.random.Generator) -> tuple[Array, Array]:
+    h = box.half
+    areas = np.array([h[1] * h[2], h[0] * h[2], h[0] * h[1]] * 2)
+    face = rng.choice(6, size=n, p=areas / areas.sum())
+    axis, sign = face % 3, np.where(face < 3, 1.0, -1.0)
+    local = rng.uniform(-1.0, 1.0, (n, 3)) * h
+    local[np.arange(n), axis] = sign * h[axis]
+    nrm = np.zeros((n, 3))
+    nrm[np.arange(n), axis] = sign
+    return local @ box.rotation.T + box.center, nrm @ box.rotation.T
+
+
+def shape_area(s: Shape) -> float:
+    """Surface area of a 3D shape (tessellated for capsules, cylinders, cones, meshes)."""
+    if isinstance(s, Box):
+        a, b, c = s.size
+        return float(2 * (a * b + b * c + a * c))
+    if isinstance(s, Sphere):
+        return float(4 * np.pi * s.radius**2)
+    return float(shape_to_trimesh(s).area)
+
+
+def area_weighted_points(shapes: Sequence[Shape], n: int, rng: np.random.Generator, drop_hidden: bool = True) -> tuple[Array, Array, NDArray[np.int64]]:
+    """``n`` points drawn uniformly on the obstacles' surfaces (each shape gets points in
+    proportion to its area) with outward normals, and the index of the shape each lies on.
+
+    Boxes and spheres are sampled exactly; other shapes on their tessellation (face
+    normals). With ``drop_hidden``, points strictly inside another obstacle are discarded,
+    so fewer than ``n`` may come back."""
+    shapes = [s for s in shapes if not isinstance(s, PointCloud)]
+    if not shapes or n <= 0:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64)
+    areas = np.array([shape_area(s) for s in shapes])
+    counts = rng.multinomial(n, areas / areas.sum())
+    pts, nrm, own = [], [], []
+    for k, (s, c) in enumerate(zip(shapes, counts)):
+        if c == 0:
+            continue
+        if isinstance(s, Box):
+            p, nn = _box_area_samples(s, int(c), rng)
+        elif isinstance(s, Sphere):
+            nn = rng.normal(size=(int(c), 3))
+            nn /= np.linalg.norm(nn, axis=1, keepdims=True)
+            p = s.center + s.radius * nn
+        else:
+            import trimesh
+
+            m = shape_to_trimesh(s)
+            p, face = trimesh.sample.sample_surface(m, int(c), seed=int(rng.integers(2**31)))
+            nn = np.asarray(m.face_normals)[face]
+            if isinstance(s, Mesh):  # a mesh may be wound inwards: orient normals outwards
+                from .collision import mesh_contains
+
+                probe = mesh_contains(s, np.asarray(p) + 1e-4 * nn)
+                nn = np.where(probe[:, None], -nn, nn)
+        pts.append(np.asarray(p, np.float64))
+        nrm.append(np.asarray(nn, np.float64))
+        own.append(np.full(len(pts[-1]), k, np.int64))
+    p, nn, o = np.concatenate(pts), np.concatenate(nrm), np.concatenate(own)
+    if drop_hidden:
+        keep = ~_hidden(p, o, shapes)
+        p, nn, o = p[keep], nn[keep], o[keep]
+    return p, nn, o
+
+
+def _hidden(p: Array, owner: NDArray[np.int64], shapes: Sequence[Shape], eps: float = 1e-6) -> NDArray[np.bool_]:
+    """Is each point strictly inside (by more than ``eps``) an obstacle other than its own?"""
+    from .collision import mesh_contains, point_cone_sqdist, point_cylinder_sqdist, point_segment_sqdist
+
+    out = np.zeros(len(p), dtype=bool)
+    for k, s in enumerate(shapes):
+        other = owner != k
+        if not other.any():
+            continue
+        q = p[other]
+        if isinstance(s, Box):
+            hit = np.all(np.abs((q - s.center) @ s.rotation) < s.half - eps, axis=1)
+        elif isinstance(s, Sphere):
+            hit = np.linalg.norm(q - s.center, axis=1) < s.radius - eps
+        elif isinstance(s, Capsule):
+            hit = point_segment_sqdist(q, s.a[None], s.b[None])[:, 0] < (s.radius - eps) ** 2
+        elif isinstance(s, Cylinder):
+            hit = point_cylinder_sqdist(q, s.center[None], s.rotation[None], np.array([s.radius - eps]), np.array([s.length / 2 - eps]))[:, 0] <= 0
+        elif isinstance(s, Cone):
+            hit = point_cone_sqdist(q, s.center[None], s.rotation[None], np.array([s.radius - eps]), np.array([s.length / 2 - eps]))[:, 0] <= 0
+        elif isinstance(s, Mesh):
+            hit = mesh_contains(s, q)
+        else:
+            continue
+        out[np.flatnonzero(other)[hit]] = True
+    return out

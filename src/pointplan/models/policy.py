@@ -67,3 +67,22 @@ class Policy:
         o = torch.as_tensor(obs_input(self.robot, obs), device=self.device)
         g = torch.as_tensor(goal_input(self.robot, q, goal), device=self.device)
         return self.actor.act(o, g).cpu().numpy()
+
+
+#: trained policies that ship inside the package: env name -> file in ``pointplan/data``
+SHIPPED = {"narrow2d": "narrow2d_policy.pt"}
+
+
+def shipped_checkpoint(env: str = "narrow2d") -> Path:
+    """The path of the policy shipped for ``env`` (2D-Narrow: PointNet on 64 boundary points
+    with normals, BC then SAC + HER; see docs/results.md)."""
+    from importlib.resources import files
+
+    try:
+        name = SHIPPED[env]
+    except KeyError:
+        raise ValueError(f"no policy ships for {env!r}; shipped: {', '.join(SHIPPED)}; train one with `pointplan train`") from None
+    path = Path(str(files("pointplan") / "data" / name))
+    if not path.is_file():
+        raise FileNotFoundError(f"the shipped policy {path} is missing from this installation")
+    return path

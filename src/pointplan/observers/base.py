@@ -46,8 +46,24 @@ class Observer(ABC):
         """The observation space of one environment."""
 
     @abstractmethod
-    def observe(self, q: Array, rng: np.random.Generator) -> NDArray[np.float32]:
-        """Observations of configurations ``q: (E, config_dim)``, one per bound scene."""
+    def observe(self, q: Array, rng: np.random.Generator, t: NDArray[np.int64] | None = None) -> NDArray[np.float32]:
+        """Observations of configurations ``q: (E, config_dim)``, one per bound scene, at
+        time steps ``t: (E,)`` (only moving obstacles care; ``None`` means time 0)."""
+
+
+def random_subsets(counts: NDArray[np.int64], pmax: int, n: int, rng: np.random.Generator) -> NDArray[np.int64]:
+    """Indices ``(E, n)`` into sets of ``counts`` valid items (of ``pmax`` slots): a random
+    subset without replacement, padded with random duplicates where a set has fewer than
+    ``n`` items (index 0 where a set is empty)."""
+    e = len(counts)
+    keys = rng.random((e, pmax))
+    keys[np.arange(pmax)[None, :] >= counts[:, None]] = np.inf  # invalid slots sort last
+    idx = np.argsort(keys, axis=1)[:, :n]
+    if idx.shape[1] < n:
+        idx = np.concatenate([idx, np.zeros((e, n - idx.shape[1]), dtype=idx.dtype)], 1)
+    short = np.arange(n)[None, :] >= counts[:, None]
+    dup = (rng.random((e, n)) * np.maximum(counts, 1)[:, None]).astype(np.int64)
+    return np.where(short, dup, idx)
 
 
 class PointSetObserver(Observer):
@@ -65,6 +81,10 @@ class PointSetObserver(Observer):
         self._pts: list[Array] = []
         self._nrm: list[Array] = []
         self._stacked: tuple[Array, Array, NDArray[np.int64]] | None = None
+
+    def move(self, pw: Array, nw: Array, t: NDArray[np.int64] | None) -> tuple[Array, Array]:
+        """Hook for moving obstacles: selected world points at time ``t`` (static: as is)."""
+        return pw, nw
 
     @abstractmethod
     def points_of(self, scene: Scene) -> tuple[Array, Array]:
@@ -105,24 +125,16 @@ class PointSetObserver(Observer):
                 sn[i, : counts[i]] = self._nrm[i]
             self._stacked = (sp, sn, counts)
         sp, sn, counts = self._stacked
-        # random keys, invalid slots sorted last: the first N are a subset without replacement
-        pmax = sp.shape[1]
-        keys = rng.random((e, pmax))
-        keys[np.arange(pmax)[None, :] >= counts[:, None]] = np.inf
-        idx = np.argsort(keys, axis=1)[:, :n]
-        if idx.shape[1] < n:
-            idx = np.concatenate([idx, np.zeros((e, n - idx.shape[1]), dtype=idx.dtype)], 1)
-        # pad scenes with fewer than N points by duplicating random points of their own
-        short = np.arange(n)[None, :] >= counts[:, None]
-        dup = (rng.random((e, n)) * np.maximum(counts, 1)[:, None]).astype(np.int64)
-        idx = np.where(short, dup, idx)
+        idx = random_subsets(counts, sp.shape[1], n, rng)
+        self._last_idx = idx
         return (
             np.take_along_axis(sp, idx[..., None], axis=1),
             np.take_along_axis(sn, idx[..., None], axis=1),
         )
 
-    def observe(self, q: Array, rng: np.random.Generator) -> NDArray[np.float32]:
+    def observe(self, q: Array, rng: np.random.Generator, t: NDArray[np.int64] | None = None) -> NDArray[np.float32]:
         pw, nw = self.select(rng)
+        pw, nw = self.move(pw, nw, t)
         p, n = self.robot.to_body_frame(q, pw, nw)
         assert self._stacked is not None
         empty = self._stacked[2] == 0

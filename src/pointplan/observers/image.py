@@ -43,7 +43,7 @@ class OccupancyImage(Observer):
     def space(self) -> spaces.Box:
         return spaces.Box(0.0, 1.0, shape=(1, self.size, self.size), dtype=np.float32)
 
-    def observe(self, q: Array, rng: np.random.Generator) -> NDArray[np.float32]:
+    def observe(self, q: Array, rng: np.random.Generator, t: NDArray[np.int64] | None = None) -> NDArray[np.float32]:
         from ..geometry.collision import CollisionWorld
 
         if self._world is None:

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
-import numpy as np
+import zlib
 
-from ..geometry.sampling import interior_points, surface_points
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geometry.sampling import area_weighted_points, interior_points, surface_points
+from ..robots.base import Robot
 from ..scenes.scene import Scene
 from .base import Array, PointSetObserver
 
@@ -35,3 +39,62 @@ class InteriorPoints(PointSetObserver):
     def points_of(self, scene: Scene) -> tuple[Array, Array]:
         p = interior_points(scene.obstacles, self.spacing, scene.low, scene.high)
         return p, np.zeros_like(p)
+
+
+class GlobalPoints(PointSetObserver):
+    """3D "global" observation: points drawn uniformly on the obstacles' surfaces (each
+    obstacle in proportion to its area) with outward normals, in the robot frame.
+
+    Each workspace gets a pool of ``pool_size`` surface points once (points hidden inside
+    another obstacle are dropped); every observation is a fresh random subset of
+    ``n_points`` (default 256) of the pool. Moving obstacles carry their points along."""
+
+    name = "global"
+    with_normals = True
+
+    def __init__(self, robot: Robot, n_points: int = 256, pool_size: int = 4096) -> None:
+        if robot.dim != 3:
+            raise ValueError("the global observation samples 3D surfaces; in 2D use 'surface-normals'")
+        super().__init__(robot, n_points, spacing=0.0)
+        self.pool_size = int(max(pool_size, n_points))
+        self._owner: list[NDArray[np.int64]] = []
+        self._owner_stacked: NDArray[np.int64] | None = None
+
+    def points_of(self, scene: Scene) -> tuple[Array, Array]:
+        rng = np.random.default_rng(zlib.crc32(scene.name.encode()))
+        p, n, owner = area_weighted_points(scene.obstacles, self.pool_size, rng)
+        scene.__dict__.setdefault("_observer_cache", {})[("GlobalPoints.owner", self.pool_size)] = owner
+        return p, n
+
+    def set_scene(self, i: int, scene: Scene) -> None:
+        super().set_scene(i, scene)
+        key = ("GlobalPoints.owner", self.pool_size)
+        owner = scene.__dict__["_observer_cache"].get(key)
+        if owner is None:  # pool cached by another instance with the same key layout
+            owner = area_weighted_points(scene.obstacles, self.pool_size, np.random.default_rng(zlib.crc32(scene.name.encode())))[2]
+        if i == len(self._owner):
+            self._owner.append(owner)
+        else:
+            self._owner[i] = owner
+        self._owner_stacked = None
+
+    def move(self, pw: Array, nw: Array, t: NDArray[np.int64] | None) -> tuple[Array, Array]:
+        dyn = [i for i, s in enumerate(self.scenes) if s.dynamic]
+        if not dyn or t is None:
+            return pw, nw
+        if self._owner_stacked is None:
+            pmax = max(len(o) for o in self._owner)
+            self._owner_stacked = np.zeros((len(self._owner), max(pmax, 1)), np.int64)
+            for i, o in enumerate(self._owner):
+                self._owner_stacked[i, : len(o)] = o
+        own = np.take_along_axis(self._owner_stacked, self._last_idx, axis=1)
+        pw, nw = pw.copy(), nw.copy()
+        for i in dyn:
+            scene = self.scenes[i]
+            c0, r0 = scene.poses_at(0)  # type: ignore[attr-defined]
+            ct, rt = scene.poses_at(int(t[i]))  # type: ignore[attr-defined]
+            rel = rt @ np.transpose(r0, (0, 2, 1))  # (K, 3, 3)
+            k = own[i]
+            pw[i] = np.einsum("nij,nj->ni", rel[k], pw[i] - c0[k]) + ct[k]
+            nw[i] = np.einsum("nij,nj->ni", rel[k], nw[i])
+        return pw, nw

@@ -16,8 +16,12 @@ PLANNERS: dict[str, Callable[..., Planner]] = {"birrt": BiRRT, "straight": Strai
 def _policy_factory(robot: Robot, checkpoint: str | None = None, **kw: Any) -> Planner:
     from .policy import PolicyPlanner
 
-    if not checkpoint:
-        raise ValueError("the policy planner needs a checkpoint (--checkpoint PATH)")
+    if not checkpoint or checkpoint == "shipped":
+        from ..models.policy import shipped_checkpoint
+
+        if robot.name != "disc2d":
+            raise ValueError(f"no policy ships for robot {robot.name!r}: pass --checkpoint PATH (train one with `pointplan train`)")
+        checkpoint = str(shipped_checkpoint("narrow2d"))
     return PolicyPlanner(checkpoint, robot=robot, **kw)
 
 

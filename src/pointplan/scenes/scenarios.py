@@ -38,7 +38,7 @@ class Scenario(ABC):
         """Problem ``index`` of ``split``: workspace ``index``, start and goal drawn from
         ``(split, index, seed)``."""
         scene = self.scene(split, index)
-        rng = np.random.default_rng(np.random.SeedSequence([zlib.crc32(split.encode()), index, seed]))
+        rng = np.random.default_rng(np.random.SeedSequence([zlib.crc32(self.name.encode()), zlib.crc32(split.encode()), index, seed]))
         start, goal = self.sample_problem(scene, rng)
         return Problem(scene, start, goal, tag=f"{self.name}/{split}/{index}/seed{seed}")
 
@@ -105,10 +105,31 @@ class Empty2DScenario(Scenario):
 SCENARIOS: dict[str, type[Scenario]] = {"narrow2d": Narrow2DScenario, "empty2d": Empty2DScenario}
 
 
-def make_scenario(name: str) -> Scenario:
-    """A scenario by name (``narrow2d``, ``empty2d``)."""
-    key = name.lower().replace("-", "").replace("_", "")
-    try:
-        return SCENARIOS[key]()
-    except KeyError:
-        raise ValueError(f"unknown environment {name!r}; known: {', '.join(SCENARIOS)}") from None
+def scenario_names() -> list[str]:
+    from .scenes3d import SCENARIOS_3D
+
+    return list(SCENARIOS) + list(SCENARIOS_3D)
+
+
+def make_scenario(name: str, robot: str | Robot | None = None, **kwargs: object) -> Scenario:
+    """A scenario by name: ``narrow2d``, ``empty2d`` (2D disc); ``boxes3d``, ``synthetic3d``,
+    ``ycb3d``, ``dynamic3d``, ``slot``, ``qureshi3d`` (``robot``: ``sphere3d`` or ``sshape``).
+    Also accepts Gymnasium ids such as ``pointplan/Boxes3D-v0``."""
+    from .scenes3d import SCENARIOS_3D
+
+    key = name.lower().split("/")[-1]
+    if key.endswith("-v0"):
+        key = key[:-3]
+    key = key.replace("-", "").replace("_", "")
+    if key in SCENARIOS_3D:
+        return SCENARIOS_3D[key](robot=robot, **kwargs)
+    if key in SCENARIOS:
+        if robot is not None:
+            from ..robots import make_robot
+
+            r = make_robot(robot) if isinstance(robot, str) else robot
+            if r.dim != 2:
+                raise ValueError(f"{name} is a 2D scenario; robot {r.name} is {r.dim}D")
+            return SCENARIOS[key](robot=r, **kwargs)  # type: ignore[call-arg]
+        return SCENARIOS[key](**kwargs)
+    raise ValueError(f"unknown environment {name!r}; known: {', '.join(scenario_names())}")

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry.collision import CollisionWorld
-from ..geometry.shapes import Shape
+from ..geometry.shapes import Box, Shape
 
 Array = NDArray[np.float64]
 
@@ -39,6 +39,71 @@ class Scene:
     def world(self) -> CollisionWorld:
         """The packed obstacles, built once."""
         return CollisionWorld.from_shapes(self.obstacles, self.dim)
+
+
+    #: whether obstacles move with time (see :class:`DynamicScene`)
+    dynamic = False
+
+    def obstacles_at(self, t: int) -> list[Shape]:
+        """The obstacles at time step ``t`` (a static scene: always the same)."""
+        return list(self.obstacles)
+
+    def world_at(self, t: int) -> CollisionWorld:
+        """The packed obstacles at time step ``t``."""
+        return self.world
+
+
+class DynamicScene(Scene):
+    """Boxes that move: box ``k`` goes from its placement in ``obstacles`` (time 0) to its
+    placement in ``targets`` (time ``period / 2``) and back, ``s(t) = (1 - cos(2 pi t /
+    period)) / 2`` of the way, centres linearly and rotations along the geodesic (slerp).
+
+    Time is the environment's step counter: a move from step ``t`` to ``t + 1`` is checked
+    against the obstacles at ``t + 1``, and the observation at step ``t`` shows them at ``t``.
+    ``world`` (used by planners that ignore time) is the scene at time 0.
+    """
+
+    dynamic = True
+
+    def __init__(self, obstacles: Sequence[Box], targets: Sequence[Box], low: Array, high: Array, period: int = 80, name: str = "") -> None:
+        super().__init__(obstacles, low, high, name)
+        self.targets = list(targets)
+        if len(self.targets) != len(self.obstacles) or not all(isinstance(b, Box) for b in list(self.obstacles) + self.targets):
+            raise ValueError("a dynamic scene needs one target box per obstacle box")
+        self.period = int(period)
+        self._worlds: dict[int, CollisionWorld] = {}
+        # relative rotations as rotation vectors, for the geodesic interpolation
+        from ..geometry import lie
+
+        rel = np.stack([a.rotation.T @ b.rotation for a, b in zip(self.obstacles, self.targets)]) if self.targets else np.zeros((0, 3, 3))
+        self._rel_rotvec = lie.so3_log(rel) if len(rel) else np.zeros((0, 3))
+
+    def fraction(self, t: int | Array) -> Array:
+        """How far along from the first placement to the second, at time ``t``."""
+        return (1.0 - np.cos(2.0 * np.pi * np.asarray(t, np.float64) / self.period)) / 2.0
+
+    def poses_at(self, t: int) -> tuple[Array, Array]:
+        """Box centres ``(K, 3)`` and rotations ``(K, 3, 3)`` at time ``t``."""
+        from ..geometry import lie
+
+        s = float(self.fraction(t))
+        c0 = np.stack([b.center for b in self.obstacles])
+        c1 = np.stack([b.center for b in self.targets])
+        r0 = np.stack([b.rotation for b in self.obstacles])
+        return c0 + s * (c1 - c0), r0 @ lie.so3_exp(s * self._rel_rotvec)
+
+    def obstacles_at(self, t: int) -> list[Shape]:
+        if not self.obstacles:
+            return []
+        c, r = self.poses_at(t)
+        return [Box(ci, b.size, ri) for ci, ri, b in zip(c, r, self.obstacles)]  # type: ignore[union-attr]
+
+    def world_at(self, t: int) -> CollisionWorld:
+        t = int(t) % self.period
+        w = self._worlds.get(t)
+        if w is None:
+            w = self._worlds[t] = CollisionWorld.from_shapes(self.obstacles_at(t), self.dim)
+        return w
 
 
 @dataclass(eq=False)

@@ -1,0 +1,141 @@
+"""The "local" observation: a panoramic depth camera simulated by ray casting."""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from ..geometry.collision import CollisionWorld
+from ..geometry.sampling import fibonacci_sphere
+from ..geometry.shapes import Box, Shape
+from ..robots.base import Robot
+from ..scenes.scene import Scene
+from .base import Array, Observer, random_subsets
+
+#: thickness of the wall slabs that close the workspace for ray casting
+WALL_THICKNESS = 0.05
+
+
+def wall_slabs(low: Array, high: Array, thickness: float = WALL_THICKNESS) -> list[Box]:
+    """Six slabs just outside the bounds, so that every ray leaving the workspace hits."""
+    low, high = np.asarray(low, np.float64), np.asarray(high, np.float64)
+    mid, ext = (low + high) / 2, high - low + 2 * thickness
+    out = []
+    for axis in range(3):
+        for side, face in ((-1, low[axis]), (1, high[axis])):
+            c = mid.copy()
+            c[axis] = face + side * thickness / 2
+            size = ext.copy()
+            size[axis] = thickness
+            out.append(Box(c, size))
+    return out
+
+
+def ray_origins(robot: Robot) -> Array:
+    """Body-frame points the rays start from: the centre for balls, the centreline corners
+    of the S-shape (6 points along its body)."""
+    if robot.name == "sshape":
+        from ..robots.sshape import S_CORNERS
+
+        return S_CORNERS.copy()
+    return np.zeros((1, robot.dim))
+
+
+def thin_grid(points: Array, normals: Array, valid: NDArray[np.bool_], spacing: float) -> NDArray[np.bool_]:
+    """Keep one point per cell of a grid of ``spacing`` over (point, normal) space, per
+    environment: ``points, normals (E, R, 3)``, ``valid (E, R)`` -> kept ``(E, R)``."""
+    e, r, _ = points.shape
+    cells = np.floor(np.concatenate([points, normals], -1) / spacing).astype(np.int64)
+    keyed = np.concatenate([np.repeat(np.arange(e)[:, None, None], r, 1), cells], -1).reshape(e * r, -1)
+    flat_valid = valid.reshape(-1)
+    idx = np.flatnonzero(flat_valid)
+    kept = np.zeros(e * r, dtype=bool)
+    if len(idx):
+        _, first = np.unique(keyed[idx], axis=0, return_index=True)
+        kept[idx[first]] = True
+    return kept.reshape(e, r)
+
+
+class LocalRays(Observer):
+    """What a panoramic depth camera on the robot sees: rays in ``n_rays`` directions on a
+    Fibonacci sphere (split evenly among the origins: the sphere's centre, or six points
+    along the S-shape), first hits within ``max_range``, thinned on a ``spacing`` grid over
+    (point, normal), resized to ``n_points`` (random subset, or duplicates), points and
+    normals in the robot frame. Wall slabs just outside the workspace close it, so every
+    ray has something to hit. Hits are not occluded by the robot's own body."""
+
+    name = "local"
+    with_normals = True
+
+    def __init__(self, robot: Robot, n_points: int = 64, n_rays: int = 256, max_range: float = 0.7, spacing: float = 0.06) -> None:
+        if robot.dim != 3:
+            raise ValueError("the ray-cast observation is implemented for 3D robots")
+        super().__init__(robot)
+        self.n_points = int(n_points)
+        self.max_range = float(max_range)
+        self.spacing = float(spacing)
+        self.origins = ray_origins(robot)
+        per = max(1, n_rays // len(self.origins))
+        dirs = fibonacci_sphere(per)
+        self.body_origins = np.repeat(self.origins, per, 0)  # (R, 3)
+        self.body_dirs = np.tile(dirs, (len(self.origins), 1))  # (R, 3)
+        self._world: CollisionWorld | None = None
+        self._static_worlds: dict[int, CollisionWorld] = {}
+
+    @property
+    def features(self) -> int:
+        return 6
+
+    @property
+    def space(self) -> spaces.Box:
+        return spaces.Box(-np.inf, np.inf, shape=(self.n_points, 6), dtype=np.float32)
+
+    def set_scene(self, i: int, scene: Scene) -> None:
+        super().set_scene(i, scene)
+        self._world = None
+
+    def ray_world(self, scene: Scene, t: int = 0) -> CollisionWorld:
+        """The scene's obstacles at time ``t`` plus the wall slabs."""
+        cache = scene.__dict__.setdefault("_ray_worlds", {})
+        key = int(t) % getattr(scene, "period", 1) if scene.dynamic else 0
+        w = cache.get(key)
+        if w is None:
+            obstacles: list[Shape] = list(scene.obstacles_at(key)) + list(wall_slabs(scene.low, scene.high))
+            w = cache[key] = CollisionWorld.from_shapes(obstacles, 3)
+        return w
+
+    def stacked_world(self, t: NDArray[np.int64] | None) -> CollisionWorld:
+        if not any(s.dynamic for s in self.scenes) or t is None:
+            if self._world is None:
+                self._world = CollisionWorld.stack([self.ray_world(s) for s in self.scenes])
+            return self._world
+        return CollisionWorld.stack([self.ray_world(s, int(ti)) for s, ti in zip(self.scenes, t)])
+
+    def cast(self, q: Array, t: NDArray[np.int64] | None = None) -> tuple[Array, Array, NDArray[np.bool_]]:
+        """World hit points and normals ``(E, R, 3)`` and which rays hit within range."""
+        from ..geometry.raycast import cast_rays
+
+        rot = self.robot.rotations(q)
+        pos = self.robot.positions(q)
+        origins = np.einsum("eij,rj->eri", rot, self.body_origins) + pos[:, None, :]
+        dirs = np.einsum("eij,rj->eri", rot, self.body_dirs)
+        hits = cast_rays(self.stacked_world(t), origins, dirs, self.max_range)
+        ok = hits.hit & (hits.distance <= self.max_range)
+        return np.where(ok[..., None], hits.points, 0.0), np.where(ok[..., None], hits.normals, 0.0), ok
+
+    def observe(self, q: Array, rng: np.random.Generator, t: NDArray[np.int64] | None = None) -> NDArray[np.float32]:
+        q = np.asarray(q, np.float64)
+        pw, nw, ok = self.cast(q, t)
+        kept = thin_grid(pw, nw, ok, self.spacing)
+        counts = kept.sum(1)
+        # move the kept rays to the front, then draw N of them
+        order = np.argsort(~kept, axis=1, kind="stable")
+        idx = np.take_along_axis(order, random_subsets(counts, kept.shape[1], self.n_points, rng), axis=1)
+        p = np.take_along_axis(pw, idx[..., None], axis=1)
+        n = np.take_along_axis(nw, idx[..., None], axis=1)
+        pb, nb = self.robot.to_body_frame(q, p, n)
+        assert nb is not None
+        out = np.concatenate([pb, nb], -1)
+        out[counts == 0] = 0.0
+        return out.astype(np.float32)
