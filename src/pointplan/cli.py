@@ -85,19 +85,61 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_render(args: argparse.Namespace) -> int:
-    from .viz.plot2d import render_problem
+def _world_observation(problem: Any, robot: Any, observation: str, n_points: int | None, q: Any, t: int, seed: int) -> tuple[Any, Any]:
+    """What the robot at ``q`` (time ``t``) observes, back in the world frame (3D)."""
+    import numpy as np
 
+    from .observers import make_observer
+
+    observer = make_observer(observation, robot, **({"n_points": n_points} if n_points else {}))
+    observer.bind([problem.scene])
+    obs = observer.observe(np.asarray(q, np.float64)[None], np.random.default_rng(seed), np.array([t]))[0]
+    rot, pos = robot.rotations(np.asarray(q, np.float64)), robot.positions(np.asarray(q, np.float64))
+    keep = np.any(obs != 0.0, axis=1)
+    return obs[keep, :3] @ rot.T + pos, obs[keep, 3:6] @ rot.T
+
+
+def cmd_render(args: argparse.Namespace) -> int:
     scenario = _scenario(args)
-    if scenario.robot.dim != 2:
-        raise CLIError("render draws 2D scenes for now")
     problem = scenario.problem("test", args.seed, seed=0)
     result = None
     if args.planner != "none":
         result = _planner(args.planner, scenario.robot, args, args.seed).plan(problem)
         print(f"{args.planner}: success={result.success} nodes={result.nodes} checks={result.collision_checks}")
-    render_problem(problem, args.output, scenario.robot, observer_name=args.observation, n_points=args.n_points, result=result, seed=args.seed)
+    robot = scenario.robot
+    if robot.dim == 2:
+        from .viz.plot2d import render_problem
+
+        if args.gif:
+            raise CLIError("--gif animates 3D scenes; for 2D use the PNG")
+        render_problem(problem, args.output, robot, observer_name=args.observation or "surface-normals", n_points=args.n_points or 64, result=result, seed=args.seed)
+        print(f"wrote {args.output}")
+        return 0
+    from .evaluation.evaluate import timed_path
+    from .viz.plot3d import render_problem_3d, render_rollout_gif
+
+    observation = args.observation or "global"
+    if observation not in ("global", "local"):
+        raise CLIError(f"3D scenes are observed as 'global' or 'local', not {observation!r}")
+    path = result.path if result is not None and len(result.path) else None
+    pts, nrm = _world_observation(problem, robot, observation, args.n_points, problem.start, 0, args.seed)
+    title = f"{problem.tag}  ({observation} observation)"
+    render_problem_3d(problem, robot, path=path, points=pts, normals=nrm, output=args.output, title=title, obstacles=problem.scene.obstacles_at(0))
     print(f"wrote {args.output}")
+    if args.gif:
+        if path is None:
+            raise CLIError("--gif needs a path: pick a planner that solves the problem")
+        timed = timed_path(robot, path)
+        scene = problem.scene
+        render_rollout_gif(
+            problem,
+            robot,
+            timed,
+            args.gif,
+            obstacles_at=scene.obstacles_at if scene.dynamic else None,
+            points_at=lambda t: _world_observation(problem, robot, observation, args.n_points, timed[t], t, args.seed)[0],
+        )
+        print(f"wrote {args.gif} ({len(timed)} frames, one per time step)")
     return 0
 
 
@@ -256,9 +298,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("render", help="draw a problem, its observation and a planner's path")
     _add_common(p)
-    p.add_argument("--observation", default="surface-normals", help="surface, surface-normals, interior or image")
-    p.add_argument("--n-points", type=int, default=64)
+    p.add_argument("--observation", help="2D: surface, surface-normals (default), interior or image; 3D: global (default) or local")
+    p.add_argument("--n-points", type=int, help="observed points (default: 64; 256 for global)")
     p.add_argument("-o", "--output", default="render.png", help="PNG file (default: %(default)s)")
+    p.add_argument("--gif", help="3D: also write an animation of the path, one frame per time step")
     p.set_defaults(func=cmd_render)
 
     p = sub.add_parser("plan", help="plan the problems of a scene file (or of --env)")

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from ._kernels import HAVE_NUMBA, obb_overlap_compiled
 from .shapes import Box, Capsule, Cone, Cylinder, Mesh, PointCloud, Shape, Sphere
 
 Array = NDArray[np.float64]
@@ -328,7 +329,10 @@ class CollisionWorld:
         h = np.broadcast_to(np.asarray(halfs, np.float64), c.shape)
         hit = np.zeros(c.shape[:-1], dtype=bool)
         if self.box_c.shape[-2]:
-            hit |= np.any(obb_overlap(c, rot, h, self.box_c, self.box_r, self.box_h), -1)
+            if HAVE_NUMBA and c.shape[:-2] == self.batch_shape:
+                hit |= np.any(obb_overlap_compiled(c, rot, h, self.box_c, self.box_r, self.box_h), -1)
+            else:
+                hit |= np.any(obb_overlap(c, rot, h, self.box_c, self.box_r, self.box_h), -1)
         if self.sph_c.shape[-2]:
             # distance from each obstacle sphere centre to each robot box
             d2 = sphere_box_sqdist(self.sph_c, c, rot, h)  # (*batch, K, M)

@@ -19,15 +19,11 @@ _EPS = 1e-8
 def hat3(w: Array) -> Array:
     """Skew-symmetric matrices of vectors ``w: (..., 3) -> (..., 3, 3)``."""
     w = np.asarray(w, dtype=np.float64)
-    z = np.zeros(w.shape[:-1])
-    return np.stack(
-        [
-            np.stack([z, -w[..., 2], w[..., 1]], -1),
-            np.stack([w[..., 2], z, -w[..., 0]], -1),
-            np.stack([-w[..., 1], w[..., 0], z], -1),
-        ],
-        -2,
-    )
+    out = np.zeros(w.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -w[..., 2], w[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = w[..., 2], -w[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -w[..., 1], w[..., 0]
+    return out
 
 
 def _so3_coeffs(theta: Array) -> tuple[Array, Array, Array]:
@@ -218,14 +214,11 @@ def quat_to_matrix(q: Array) -> Array:
     q = np.asarray(q, dtype=np.float64)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )
+    out = np.empty(q.shape[:-1] + (3, 3))
+    out[..., 0, 0], out[..., 0, 1], out[..., 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)
+    out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = 2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)
+    out[..., 2, 0], out[..., 2, 1], out[..., 2, 2] = 2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)
+    return out
 
 
 def matrix_to_quat(r: Array) -> Array:

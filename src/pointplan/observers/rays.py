@@ -47,12 +47,15 @@ def thin_grid(points: Array, normals: Array, valid: NDArray[np.bool_], spacing: 
     environment: ``points, normals (E, R, 3)``, ``valid (E, R)`` -> kept ``(E, R)``."""
     e, r, _ = points.shape
     cells = np.floor(np.concatenate([points, normals], -1) / spacing).astype(np.int64)
-    keyed = np.concatenate([np.repeat(np.arange(e)[:, None, None], r, 1), cells], -1).reshape(e * r, -1)
-    flat_valid = valid.reshape(-1)
-    idx = np.flatnonzero(flat_valid)
+    # one int64 key per (environment, cell): 6 cell coordinates of 8 bits each, env above
+    cells = np.clip(cells + 128, 0, 255)
+    key = np.repeat(np.arange(e, dtype=np.int64)[:, None], r, 1) << np.int64(48)
+    for k in range(6):
+        key |= cells[..., k] << np.int64(8 * k)
+    idx = np.flatnonzero(valid.reshape(-1))
     kept = np.zeros(e * r, dtype=bool)
     if len(idx):
-        _, first = np.unique(keyed[idx], axis=0, return_index=True)
+        _, first = np.unique(key.reshape(-1)[idx], return_index=True)
         kept[idx[first]] = True
     return kept.reshape(e, r)
 

@@ -1,0 +1,91 @@
+"""Compiled (numba) kernels for the hottest collision test: oriented boxes against oriented
+boxes. Falls back to the numpy version in ``collision.py`` when numba is missing."""
+
+from __future__ import annotations
+
+import numpy as np
+
+try:
+    import numba
+
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover - numba is a dependency, but keep working without it
+    HAVE_NUMBA = False
+
+
+def _obb_overlap_flat(ca, ra, ha, cb, rb, hb, out):  # type: ignore[no-untyped-def]
+    """Separating-axis test of boxes A ``(B, M, ...)`` against boxes B ``(B, K, ...)``
+    (rotation columns are the box axes, ``h`` half sides); writes ``out (B, M, K)``."""
+    nb, m, k = out.shape
+    rel = np.empty((3, 3))
+    absr = np.empty((3, 3))
+    t = np.empty(3)
+    for b in range(nb):
+        for i in range(m):
+            for j in range(k):
+                # bounding-sphere prefilter
+                d0 = cb[b, j, 0] - ca[b, i, 0]
+                d1 = cb[b, j, 1] - ca[b, i, 1]
+                d2 = cb[b, j, 2] - ca[b, i, 2]
+                reach = np.sqrt(ha[b, i, 0] ** 2 + ha[b, i, 1] ** 2 + ha[b, i, 2] ** 2) + np.sqrt(hb[b, j, 0] ** 2 + hb[b, j, 1] ** 2 + hb[b, j, 2] ** 2)
+                if d0 * d0 + d1 * d1 + d2 * d2 > reach * reach:
+                    out[b, i, j] = False
+                    continue
+                for p in range(3):
+                    t[p] = ra[b, i, 0, p] * d0 + ra[b, i, 1, p] * d1 + ra[b, i, 2, p] * d2
+                    for q in range(3):
+                        s = 0.0
+                        for r in range(3):
+                            s += ra[b, i, r, p] * rb[b, j, r, q]
+                        rel[p, q] = s
+                        absr[p, q] = abs(s) + 1e-9
+                sep = False
+                for p in range(3):  # A's face axes
+                    rb_ = hb[b, j, 0] * absr[p, 0] + hb[b, j, 1] * absr[p, 1] + hb[b, j, 2] * absr[p, 2]
+                    if abs(t[p]) > ha[b, i, p] + rb_:
+                        sep = True
+                        break
+                if not sep:
+                    for q in range(3):  # B's face axes
+                        tb = t[0] * rel[0, q] + t[1] * rel[1, q] + t[2] * rel[2, q]
+                        ra_ = ha[b, i, 0] * absr[0, q] + ha[b, i, 1] * absr[1, q] + ha[b, i, 2] * absr[2, q]
+                        if abs(tb) > ra_ + hb[b, j, q]:
+                            sep = True
+                            break
+                if not sep:
+                    for p in range(3):  # cross products of edges
+                        p1, p2 = (p + 1) % 3, (p + 2) % 3
+                        for q in range(3):
+                            q1, q2 = (q + 1) % 3, (q + 2) % 3
+                            lhs = abs(t[p2] * rel[p1, q] - t[p1] * rel[p2, q])
+                            ra_ = ha[b, i, p1] * absr[p2, q] + ha[b, i, p2] * absr[p1, q]
+                            rb_ = hb[b, j, q1] * absr[p, q2] + hb[b, j, q2] * absr[p, q1]
+                            if lhs > ra_ + rb_:
+                                sep = True
+                                break
+                        if sep:
+                            break
+                out[b, i, j] = not sep
+
+
+if HAVE_NUMBA:
+    _obb_overlap_flat = numba.njit(cache=True, nogil=True)(_obb_overlap_flat)
+
+
+def obb_overlap_compiled(ca, ra, ha, cb, rb, hb):  # type: ignore[no-untyped-def]
+    """``(..., M, K)`` overlap of boxes ``(..., M, ...)`` and ``(..., K, ...)`` (same batch)."""
+    batch = ca.shape[:-2]
+    m, k = ca.shape[-2], cb.shape[-2]
+    nb = int(np.prod(batch)) if batch else 1
+    out = np.empty((nb, m, k), dtype=np.bool_)
+    f = np.ascontiguousarray
+    _obb_overlap_flat(
+        f(ca.reshape(nb, m, 3), dtype=np.float64),
+        f(ra.reshape(nb, m, 3, 3), dtype=np.float64),
+        f(ha.reshape(nb, m, 3), dtype=np.float64),
+        f(cb.reshape(nb, k, 3), dtype=np.float64),
+        f(rb.reshape(nb, k, 3, 3), dtype=np.float64),
+        f(hb.reshape(nb, k, 3), dtype=np.float64),
+        out,
+    )
+    return out.reshape(batch + (m, k))
