@@ -19,6 +19,7 @@ METRIC_KEYS = {
     "episodes",
     "nodes_mean",
     "nodes_median",
+    "nodes_mean_solved",
     "collision_checks_mean",
     "collision_checks_median",
     "path_length_mean",
@@ -135,6 +136,7 @@ def test_evaluate_decides_success_itself(robot: Disc2D, wall_problem: Problem) -
     assert m["success_rate"] == pytest.approx(1 / 3)
     assert m["planner_claims_disagree"] == 1
     assert m["nodes_mean"] == pytest.approx(5 / 3) and m["nodes_median"] == 1
+    assert m["nodes_mean_solved"] == report.records[1].nodes  # the one solved problem
     assert m["collision_checks_mean"] == pytest.approx(20 / 3)
     # path length over the successful problem only
     assert m["path_length_mean"] == pytest.approx(0.5) and m["path_length_median"] == pytest.approx(0.5)

@@ -135,8 +135,8 @@ class EvalReport:
     records: list[EpisodeRecord] = field(default_factory=list)
 
     def metrics(self) -> dict[str, Any]:
-        """Success rate; nodes, collision checks and time over *all* problems; path length
-        over the successful ones; and how often the planner's claim disagreed with the check."""
+        """Success rate; nodes, collision checks and time over *all* problems (and nodes over
+        the solved ones); path length over the successful ones; and how often the planner's claim disagreed with the check."""
         r = self.records
         ok = [x for x in r if x.success]
         nodes = [float(x.nodes) for x in r]
@@ -148,6 +148,7 @@ class EvalReport:
             "episodes": len(r),
             "nodes_mean": _mean(nodes),
             "nodes_median": _median(nodes),
+            "nodes_mean_solved": _mean([float(x.nodes) for x in ok]),
             "collision_checks_mean": _mean(checks),
             "collision_checks_median": _median(checks),
             "path_length_mean": _mean(lengths),
@@ -203,6 +204,7 @@ _ROWS = [
     ("episodes", "episodes"),
     ("nodes_mean", "nodes (mean)"),
     ("nodes_median", "nodes (median)"),
+    ("nodes_mean_solved", "nodes (mean, solved)"),
     ("collision_checks_mean", "collision checks (mean)"),
     ("collision_checks_median", "collision checks (median)"),
     ("path_length_mean", "path length (mean)"),

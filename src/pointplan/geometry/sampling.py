@@ -224,11 +224,8 @@ def area_weighted_points(shapes: Sequence[Shape], n: int, rng: np.random.Generat
             m = shape_to_trimesh(s)
             p, face = trimesh.sample.sample_surface(m, int(c), seed=int(rng.integers(2**31)))
             nn = np.asarray(m.face_normals)[face]
-            if isinstance(s, Mesh):  # a mesh may be wound inwards: orient normals outwards
-                from .collision import mesh_contains
-
-                probe = mesh_contains(s, np.asarray(p) + 1e-4 * nn)
-                nn = np.where(probe[:, None], -nn, nn)
+            if isinstance(s, Mesh) and m.is_watertight and m.volume < 0:
+                nn = -nn  # a closed mesh wound inwards: turn its normals outwards
         pts.append(np.asarray(p, np.float64))
         nrm.append(np.asarray(nn, np.float64))
         own.append(np.full(len(pts[-1]), k, np.int64))
@@ -260,7 +257,11 @@ def _hidden(p: Array, owner: NDArray[np.int64], shapes: Sequence[Shape], eps: fl
         elif isinstance(s, Cone):
             hit = point_cone_sqdist(q, s.center[None], s.rotation[None], np.array([s.radius - eps]), np.array([s.length / 2 - eps]))[:, 0] <= 0
         elif isinstance(s, Mesh):
-            hit = mesh_contains(s, q)
+            lo, hi = s.vertices.min(0), s.vertices.max(0)
+            box = np.all((q > lo) & (q < hi), axis=1)  # the inside test only where it can hold
+            hit = np.zeros(len(q), dtype=bool)
+            if box.any():
+                hit[box] = mesh_contains(s, q[box])
         else:
             continue
         out[np.flatnonzero(other)[hit]] = True
