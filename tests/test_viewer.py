@@ -250,3 +250,19 @@ def test_viewer_refuses_2d_problems() -> None:
     problem = Problem(Scene([], np.zeros(2), np.ones(2)), [0.1, 0.1], [0.9, 0.9])
     with pytest.raises(ValueError, match="3D"):
         view_problem(problem, make_robot("disc2d"), block=False)
+
+
+def test_a_failing_viewer_releases_its_port() -> None:
+    pytest.importorskip("viser")
+    from pointplan.viz.viewer import view_problem
+
+    robot = make_robot("sphere3d")
+    problem = Problem(Scene([SHAPES["sphere"]], np.full(3, -1.0), np.full(3, 1.0)), [-0.8, -0.8, -0.8], [0.8, 0.8, 0.8])
+    port = _free_port()
+    with pytest.raises(ValueError, match=r"\(N, 3\)"):
+        view_problem(problem, robot, points_at=lambda t: np.zeros((4, 2)), port=port, block=False)
+    server = view_problem(problem, robot, port=port, block=False)
+    try:
+        assert server.get_port() == port  # viser moves to another port when one is taken
+    finally:
+        server.stop()

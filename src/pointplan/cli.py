@@ -143,6 +143,37 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_view(args: argparse.Namespace) -> int:
+    import importlib.util
+
+    from .viz.viewer import VIEWER_MISSING
+
+    if importlib.util.find_spec("viser") is None:
+        raise CLIError(VIEWER_MISSING)  # before any planning
+    from .evaluation.evaluate import timed_path
+    from .viz.viewer import view_problem
+
+    scenario = _scenario(args)
+    robot = scenario.robot
+    if robot.dim != 3:
+        raise CLIError("the viewer shows 3D scenes (--env boxes3d, slot, ...); for 2D use `pointplan render`")
+    problem = scenario.problem("test", args.seed, seed=0)
+    path = None
+    if args.planner != "none":
+        result = _planner(args.planner, robot, args, args.seed).plan(problem)
+        print(f"{args.planner}: success={result.success} nodes={result.nodes} checks={result.collision_checks}")
+        path = result.path if len(result.path) else None
+    points_at = None
+    if args.observation:
+        timed = timed_path(robot, path) if path is not None else problem.start[None]
+
+        def points_at(t: int) -> Any:
+            return _world_observation(problem, robot, args.observation, args.n_points, timed[t], t, args.seed)[0]
+
+    view_problem(problem, robot, path=path, points_at=points_at, port=args.port, host=args.host)
+    return 0
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
     from .evaluation import check_path, evaluate, format_table
 
@@ -303,6 +334,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", default="render.png", help="PNG file (default: %(default)s)")
     p.add_argument("--gif", help="3D: also write an animation of the path, one frame per time step")
     p.set_defaults(func=cmd_render)
+
+    p = sub.add_parser("view", help="interactive 3D viewer in the browser (pip install 'pointplan[viewer]')")
+    _add_common(p)
+    p.add_argument("--observation", choices=["global", "local"], help="also show what the robot observes at each step")
+    p.add_argument("--n-points", type=int, help="observed points")
+    p.add_argument("--port", type=int, default=8080, help="(default: %(default)s)")
+    p.add_argument("--host", default="127.0.0.1", help="0.0.0.0 to serve other machines (default: %(default)s)")
+    p.set_defaults(func=cmd_view)
 
     p = sub.add_parser("plan", help="plan the problems of a scene file (or of --env)")
     _add_common(p)
