@@ -571,7 +571,7 @@ def test_q_free_stays_free_and_in_bounds(indices: list[int], seed: int, scale: f
     low = np.stack([s.low for s in scenes])
     high = np.stack([s.high for s in scenes])
     q = np.concatenate([robot.sample_free(s.world, rng, 1, s.low, s.high) for s in scenes])
-    # push some starts against the border (where still free) so that clipping matters
+    # push some starts against the border (where still free) so that the bounds matter
     pushed = np.clip(q, 0.003, 0.997)
     pushed_free = np.array([not robot.collides(s.world, pushed[i]) for i, s in enumerate(scenes)])
     q = np.where(((rng.random(e) < 0.5) & pushed_free)[:, None], pushed, q)
@@ -587,9 +587,15 @@ def test_q_free_stays_free_and_in_bounds(indices: list[int], seed: int, scale: f
         for j, i in enumerate(range(e)[rows]):
             assert not robot.collides(scenes[i].world, new_q[j])
         assert np.all(checks >= 1)
-        # a move that did not collide ends where the clipped motion ends
-        end = np.clip(q0 + v, lo, hi)
-        np.testing.assert_allclose(new_q[~collided], end[~collided], atol=1e-12)
+        # a move that neither collided nor left the bounds ends where it was sent
+        end = q0 + v
+        inside = np.all((end >= lo) & (end <= hi), axis=1)
+        np.testing.assert_allclose(new_q[~collided & inside], end[~collided & inside], atol=1e-12)
+        # and every move ends on its commanded segment (the bounds stop it, no sliding)
+        s_along = np.einsum("ij,ij->i", new_q - q0, v) / np.maximum(np.einsum("ij,ij->i", v, v), 1e-18)
+        np.testing.assert_allclose(new_q, q0 + s_along[:, None] * v, atol=1e-12)
+        assert np.all((s_along >= -1e-9) & (s_along <= 1 + 1e-9))
+        assert np.all(s_along[~inside & ~collided] < 1)
         # nothing moves further than its twist
         step = np.linalg.norm(new_q - q0, axis=1)
         assert np.all(step <= np.linalg.norm(v, axis=1) + 1e-12)

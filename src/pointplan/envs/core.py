@@ -55,12 +55,14 @@ def q_free(
     substep: float = 0.01,
 ) -> tuple[Array, Bool, NDArray[np.int64]]:
     """Walk ``q -> q * exp(twist)`` in sub-steps of at most ``substep`` and stop at the last
-    free one.
+    free one inside the bounds.
 
     ``q: (E, config_dim)``, ``twist: (E, twist_dim)``, ``world`` stacked over ``E`` (or a
-    single world), ``low, high: (E, d)``. Every sub-configuration is clipped to the bounds
-    *before* it is checked, so the returned configuration is both inside the bounds and
-    free. Returns the new configurations, whether any sub-step collided, and the number of
+    single world), ``low, high: (E, d)``. The bounds stop a move like an obstacle does, but
+    without counting as a collision: the robot ends at the last sub-step before the first
+    one that collides or leaves the bounds. So the executed motion is always a piece of the
+    commanded geodesic (what the evaluator re-checks) and stays inside the bounds. Returns
+    the new configurations, whether the move was stopped by a collision, and the number of
     collision checks per environment. A move shorter than ``substep`` is still checked.
     """
     q = np.asarray(q, np.float64)
@@ -71,11 +73,15 @@ def q_free(
     k = np.arange(1, nmax + 1)
     s = np.minimum(k[None, :] / n[:, None], 1.0)  # (E, nmax); extra sub-steps repeat the end
     qs = robot.integrate(np.broadcast_to(q[:, None], (q.shape[0], nmax, q.shape[1])), twist[:, None] * s[..., None])
-    qs = robot.clip(qs, low[:, None], high[:, None])
+    pos = robot.positions(qs)
+    out = np.any((pos < low[:, None] - 1e-12) | (pos > high[:, None] + 1e-12), axis=-1)
     hit = robot.collides(world, qs)
-    hit &= k[None, :] <= n[:, None]
-    collided = hit.any(-1)
-    first = np.where(collided, hit.argmax(-1), n)  # index of the first colliding sub-step
+    valid = k[None, :] <= n[:, None]
+    stop = (hit | out) & valid
+    stopped = stop.any(-1)
+    first = np.where(stopped, stop.argmax(-1), n)  # index of the first sub-step that stops
+    rows = np.arange(q.shape[0])
+    collided = stopped & hit[rows, np.minimum(first, nmax - 1)]
     last = first - 1
     rows = np.arange(q.shape[0])
     new_q = np.where((last >= 0)[:, None], qs[rows, np.maximum(last, 0)], q)
@@ -175,11 +181,17 @@ class BatchedCore:
         a = np.clip(np.asarray(actions, np.float64).reshape(self.num_envs, self.robot.twist_dim), -1.0, 1.0)
         twist = a * self.robot.action_scale
         # a move from step t to t + 1 is checked against the obstacles at t + 1
-        self.q, collided, checks = q_free(self.robot, self.world_at(self.t + 1), self.q, twist, self.low, self.high, self.config.substep)
+        world = self.world_at(self.t + 1)
+        self.q, collided, checks = q_free(self.robot, world, self.q, twist, self.low, self.high, self.config.substep)
+        crushed = np.zeros(self.num_envs, dtype=bool)
+        if world is not self._world:  # moving obstacles: one may have run into the robot
+            crushed = self.robot.collides(world, self.q[:, None])[:, 0]
+            collided |= crushed
         self.t += 1
         success = self.success(self.q, self.goal, collided)
         action_norm = np.linalg.norm(a, axis=-1)
         reward = self.reward(action_norm, collided, success)
-        truncated = (self.t >= self.horizon) & ~success
-        info = {"collided": collided, "is_success": success, "action_norm": action_norm, "collision_checks": checks}
+        # an obstacle that ran into the robot ends the episode, as a failure
+        truncated = ((self.t >= self.horizon) | crushed) & ~success
+        info = {"collided": collided, "crushed": crushed, "is_success": success, "action_norm": action_norm, "collision_checks": checks}
         return reward, success, truncated, info

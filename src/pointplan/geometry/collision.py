@@ -186,10 +186,13 @@ class CollisionWorld:
     con_half: Array = field(default_factory=lambda: np.zeros(0))
     #: per scene: point clouds (merged) as a KD-tree, or None
     cloud_trees: list[cKDTree | None] = field(default_factory=list)
-    #: per scene: coal collision objects of meshes (and primitives coal must handle)
+    #: per scene: coal collision objects of meshes
     coal_objects: list[list[tuple[Any, Any]]] = field(default_factory=list)
-    #: per scene: shapes kept for the coal fallback (capsules, cylinders)
+    #: per scene: shapes kept for the coal fallback (capsules, cylinders, cones)
     shapes: list[list[Shape]] = field(default_factory=list)
+    #: per scene: coal geometry, transform, bounding-sphere centre and radius, and the mesh
+    #: (None for a primitive) of every obstacle the coal fallback handles, built once
+    coal_items: list[list[tuple[Any, Any, Array, float, Mesh | None]]] = field(default_factory=list)
     #: per scene: the meshes behind the coal objects (for the inside test: meshes are solid)
     meshes: list[list[Mesh]] = field(default_factory=list)
 
@@ -243,6 +246,10 @@ class CollisionWorld:
             cloud_trees=[tree],
             coal_objects=[coal_objs],
             shapes=[list(caps) + list(cyls) + list(cones)],
+            coal_items=[
+                [(g, tf, *_bounding_sphere(m), m) for m, (g, tf) in zip(meshes, coal_objs)]
+                + ([(*_coal_primitive(sh), *_bounding_sphere(sh), None) for sh in list(caps) + list(cyls) + list(cones)] if d == 3 else [])
+            ],
             meshes=[list(meshes)],
         )
 
@@ -286,6 +293,7 @@ class CollisionWorld:
             cloud_trees=[w.cloud_trees[0] for w in worlds],
             coal_objects=[w.coal_objects[0] for w in worlds],
             shapes=[w.shapes[0] for w in worlds],
+            coal_items=[w.coal_items[0] for w in worlds],
             meshes=[w.meshes[0] if w.meshes else [] for w in worlds],
         )
 
@@ -379,14 +387,7 @@ class CollisionWorld:
         out = np.zeros(shape, dtype=bool)
         scenes = range(1) if self.batch_shape == () else range(self.batch_shape[0])
         for i in scenes:
-            meshes = self.meshes[i] if i < len(self.meshes) else []
-            items: list[tuple[Any, Any, Array, float, Mesh | None]] = []
-            for m, (g, tf) in zip(meshes, self.coal_objects[i]):
-                items.append((g, tf, *_bounding_sphere(m), m))
-            if not meshes_only:
-                for sh in self.shapes[i]:
-                    g, tf = _coal_primitive(sh)
-                    items.append((g, tf, *_bounding_sphere(sh), None))
+            items = [it for it in self.coal_items[i] if it[4] is not None or not meshes_only]
             if not items:
                 continue
             ci = c if self.batch_shape == () else c[i]
@@ -427,14 +428,10 @@ class CollisionWorld:
         return out
 
 
-_BOUNDS_CACHE: dict[int, tuple[Any, Array, float]] = {}
-
-
 def _bounding_sphere(s: Shape) -> tuple[Array, float]:
-    """A sphere enclosing a capsule, cylinder, cone or mesh (cached per shape object)."""
-    hit = _BOUNDS_CACHE.get(id(s))
-    if hit is not None and hit[0] is s:
-        return hit[1], hit[2]
+    """A sphere enclosing a capsule, cylinder, cone or mesh."""
+    if isinstance(s, Mesh) and not len(s.vertices):
+        return np.full(3, _FAR), 0.0  # nothing to hit
     if isinstance(s, Mesh):
         c = (s.vertices.min(0) + s.vertices.max(0)) / 2
         r = float(np.sqrt(np.max(np.sum((s.vertices - c) ** 2, -1))))
@@ -444,9 +441,6 @@ def _bounding_sphere(s: Shape) -> tuple[Array, float]:
         c, r = s.center, float(np.hypot(s.radius, s.length / 2))
     else:
         raise TypeError(f"no bounding sphere for {type(s).__name__}")
-    if len(_BOUNDS_CACHE) > 100_000:
-        _BOUNDS_CACHE.clear()
-    _BOUNDS_CACHE[id(s)] = (s, c, r)
     return c, r
 
 

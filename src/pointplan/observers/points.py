@@ -10,7 +10,7 @@ from numpy.typing import NDArray
 from ..geometry.sampling import area_weighted_points, interior_points, surface_points
 from ..robots.base import Robot
 from ..scenes.scene import Scene
-from .base import Array, PointSetObserver
+from .base import Array, Observer, PointSetObserver
 
 
 class SurfacePoints(PointSetObserver):
@@ -60,23 +60,31 @@ class GlobalPoints(PointSetObserver):
         self._owner: list[NDArray[np.int64]] = []
         self._owner_stacked: NDArray[np.int64] | None = None
 
+    def pool(self, scene: Scene) -> tuple[Array, Array, NDArray[np.int64]]:
+        """The workspace's surface pool: points, normals and the obstacle each lies on
+        (cached on the scene, per pool size)."""
+        cache = scene.__dict__.setdefault("_observer_cache", {})
+        key = ("GlobalPoints", self.pool_size)
+        if key not in cache:
+            rng = np.random.default_rng(zlib.crc32(scene.name.encode()))
+            cache[key] = area_weighted_points(scene.obstacles, self.pool_size, rng)
+        return cache[key]
+
     def points_of(self, scene: Scene) -> tuple[Array, Array]:
-        rng = np.random.default_rng(zlib.crc32(scene.name.encode()))
-        p, n, owner = area_weighted_points(scene.obstacles, self.pool_size, rng)
-        scene.__dict__.setdefault("_observer_cache", {})[("GlobalPoints.owner", self.pool_size)] = owner
+        p, n, _ = self.pool(scene)
         return p, n
 
     def set_scene(self, i: int, scene: Scene) -> None:
-        super().set_scene(i, scene)
-        key = ("GlobalPoints.owner", self.pool_size)
-        owner = scene.__dict__["_observer_cache"].get(key)
-        if owner is None:  # pool cached by another instance with the same key layout
-            owner = area_weighted_points(scene.obstacles, self.pool_size, np.random.default_rng(zlib.crc32(scene.name.encode())))[2]
-        if i == len(self._owner):
+        Observer.set_scene(self, i, scene)
+        p, n, owner = self.pool(scene)
+        self._stacked = None
+        self._owner_stacked = None
+        if i == len(self._pts):
+            self._pts.append(p)
+            self._nrm.append(n)
             self._owner.append(owner)
         else:
-            self._owner[i] = owner
-        self._owner_stacked = None
+            self._pts[i], self._nrm[i], self._owner[i] = p, n, owner
 
     def move(self, pw: Array, nw: Array, t: NDArray[np.int64] | None) -> tuple[Array, Array]:
         dyn = [i for i, s in enumerate(self.scenes) if s.dynamic]

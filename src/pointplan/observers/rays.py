@@ -45,6 +45,8 @@ def ray_origins(robot: Robot) -> Array:
 def thin_grid(points: Array, normals: Array, valid: NDArray[np.bool_], spacing: float) -> NDArray[np.bool_]:
     """Keep one point per cell of a grid of ``spacing`` over (point, normal) space, per
     environment: ``points, normals (E, R, 3)``, ``valid (E, R)`` -> kept ``(E, R)``."""
+    if spacing < 0.01:
+        raise ValueError("thinning spacing below 0.01 is not supported (cell keys are 8-bit)")
     e, r, _ = points.shape
     cells = np.floor(np.concatenate([points, normals], -1) / spacing).astype(np.int64)
     # one int64 key per (environment, cell): 6 cell coordinates of 8 bits each, env above
@@ -66,7 +68,8 @@ class LocalRays(Observer):
     along the S-shape), first hits within ``max_range``, thinned on a ``spacing`` grid over
     (point, normal), resized to ``n_points`` (random subset, or duplicates), points and
     normals in the robot frame. Wall slabs just outside the workspace close it, so every
-    ray has something to hit. Hits are not occluded by the robot's own body."""
+    ray has something to hit. Hits are not occluded by the robot's own body; rays from body
+    points outside the workspace are dropped."""
 
     name = "local"
     with_normals = True
@@ -125,6 +128,11 @@ class LocalRays(Observer):
         dirs = np.einsum("eij,rj->eri", rot, self.body_dirs)
         hits = cast_rays(self.stacked_world(t), origins, dirs, self.max_range)
         ok = hits.hit & (hits.distance <= self.max_range)
+        # a ray whose origin (a point of the body) pokes out of the workspace sees nothing:
+        # it would start inside a wall slab
+        low = np.stack([s.low for s in self.scenes])[:, None]
+        high = np.stack([s.high for s in self.scenes])[:, None]
+        ok &= np.all((origins > low) & (origins < high), axis=-1)
         return np.where(ok[..., None], hits.points, 0.0), np.where(ok[..., None], hits.normals, 0.0), ok
 
     def observe(self, q: Array, rng: np.random.Generator, t: NDArray[np.int64] | None = None) -> NDArray[np.float32]:

@@ -56,7 +56,7 @@ def rollout_batch(act: ActFn, robot: Robot, env: EnvConfig, problems: Sequence[P
         active = np.ones(n, bool)
         success = np.zeros(n, bool)
         for t in range(horizon):
-            obs = core.observe(rng)["observation"]
+            obs = core.observe(rng)["observation"]  # (at each problem's own time step)
             a = np.asarray(act(obs, core.q.copy(), core.goal.copy()), np.float32)
             a[~active] = 0.0  # finished problems stand still
             _, term, _, info = core.step(a)
@@ -64,7 +64,7 @@ def rollout_batch(act: ActFn, robot: Robot, env: EnvConfig, problems: Sequence[P
             length += active
             checks += np.where(active, info["collision_checks"], 0)
             success |= term & active
-            active &= ~term
+            active &= ~(term | info["crushed"])  # a moving obstacle that hits the robot ends it
             if not active.any():
                 break
         dt = (time.perf_counter() - t0) / n

@@ -8,6 +8,7 @@ and the S-shape (``sshape``, 6 DoF); the horizon is 80 steps.
 
 from __future__ import annotations
 
+import math
 import zlib
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -101,8 +102,9 @@ class Boxes3DScenario(Scenario3D):
 
 
 def synthetic_shape(kind: str, size: Array, center: Array, rotation: Array) -> Shape:
-    """A shape of ``kind`` filling roughly the box of full sides ``size``: the radius is a
-    quarter of the mean of the first two sides, the length along the axis the third side."""
+    """A shape of ``kind`` filling roughly the box of full sides ``size``: the radius is half
+    the mean of the first two sides (a capsule's at most a quarter of the third, so that it
+    keeps a straight part), the length along the axis the third side."""
     radius = float(size[0] + size[1]) / 4.0
     length = float(size[2])
     if kind == "sphere":
@@ -112,7 +114,8 @@ def synthetic_shape(kind: str, size: Array, center: Array, rotation: Array) -> S
     if kind == "cone":
         return Cone(center, radius, length, rotation)
     if kind == "capsule":
-        seg = max(length - 2.0 * radius, 0.0) / 2.0
+        radius = min(radius, length / 4.0)
+        seg = (length - 2.0 * radius) / 2.0
         axis = rotation[:, 2]
         return Capsule(center - seg * axis, center + seg * axis, radius)
     raise ValueError(f"unknown synthetic shape {kind!r}")
@@ -212,14 +215,15 @@ class SlotConfig:
     wall_thickness: float = 0.04
     #: the slot's centre is uniform in [-c, c] along the wall's two axes
     center_range: float = 0.15
-    #: start and goal are this far from the wall at least (positions, along x)
-    side_gap: float = 0.2
+    #: start and goal positions are this far from the wall at least (along x): more than the
+    #: S-shape's reach from its frame (0.29), so its whole body is on its side
+    side_gap: float = 0.3
 
 
 class SlotScenario(Scenario3D):
     """Slot: a wall spanning the workspace at x = 0 with one slot, its width drawn between 2
     and 8 bar thicknesses, its long side along y or z; start on the x < 0 side, goal on the
-    x > 0 side. The default robot is the S-shape."""
+    x > 0 side, each at least 0.3 from the wall. The default robot is the S-shape."""
 
     name = "slot"
     default_robot = "sshape"
@@ -292,14 +296,35 @@ QURESHI_SIZES = np.array(
 )
 
 
+def unrank_permutation(rank: int, n: int) -> list[int]:
+    """The permutation of ``range(n)`` with lexicographic rank ``rank`` (Lehmer code)."""
+    items, out = list(range(n)), []
+    for k in range(n, 0, -1):
+        f = math.factorial(k - 1)
+        i, rank = divmod(rank, f)
+        out.append(items.pop(i))
+    return out
+
+
 class Qureshi3DScenario(Scenario3D):
     """3D-Qureshi: ten axis-aligned boxes at fixed centres; each workspace assigns the ten
-    sizes to the centres by its own random permutation."""
+    sizes to the centres by a permutation of its own. There are only 10! permutations, so
+    the splits own disjoint sets of them: ranks 0 (mod 10) are test, 1 (mod 10) val, the
+    rest train."""
 
     name = "qureshi3d"
+    SPLIT_RESIDUES = {"test": (0,), "val": (1,), "train": tuple(range(2, 10))}
+
+    def scene(self, split: str, index: int) -> Scene:
+        self._split = split  # build() needs to know which permutations it may use
+        return super().scene(split, index)
 
     def build(self, rng: np.random.Generator) -> Scene:
-        perm = rng.permutation(len(QURESHI_SIZES))
+        n = len(QURESHI_SIZES)
+        residues = self.SPLIT_RESIDUES[self._split]
+        block = int(rng.integers(0, math.factorial(n) // 10))
+        rank = 10 * block + residues[int(rng.integers(0, len(residues)))]
+        perm = unrank_permutation(rank, n)
         return Scene([Box(c, QURESHI_SIZES[p]) for c, p in zip(QURESHI_CENTERS, perm)], LOW, HIGH)
 
 
