@@ -487,3 +487,26 @@ def test_random_scenes(seed: int) -> None:
     samples = o[:, None, :] + (t[:, None] * s[None, :])[..., None] * d[:, None, :]
     assert np.all(solid_dist(w, samples.reshape(-1, 3)) > 0)
     assert np.all(solid_dist(w, o[~hit] + 6.0 * d[~hit]) > 0)
+
+
+def test_compiled_box_kernel_matches_numpy(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The numba slab test and the numpy one give the same hits, normals and distances,
+    rays in a face plane and axis-parallel rays included."""
+    from pointplan.geometry import lie
+
+    rng = np.random.default_rng(3)
+    boxes = [Box(rng.uniform(-0.4, 0.4, 3), rng.uniform(0.1, 0.5, 3), lie.random_rotations(rng, 1)[0]) for _ in range(6)]
+    boxes.append(Box([0.0, 0.0, 0.0], [0.2, 0.2, 0.2]))
+    world = CollisionWorld.from_shapes(boxes, 3)
+    o = rng.uniform(-0.6, 0.6, (400, 3))
+    d = rng.normal(size=(400, 3))
+    d[:20] = [1.0, 0.0, 0.0]
+    o[:10] = [-0.5, 0.1, 0.0]  # in the plane of a face of the axis-aligned box
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    compiled = cast_rays(world, o, d)
+    monkeypatch.setattr(raycast, "HAVE_NUMBA", False)
+    plain = cast_rays(world, o, d)
+    np.testing.assert_array_equal(compiled.hit, plain.hit)
+    assert compiled.hit[:10].all()
+    np.testing.assert_allclose(compiled.distance[compiled.hit], plain.distance[plain.hit], atol=1e-12)
+    np.testing.assert_allclose(compiled.normals[compiled.hit], plain.normals[plain.hit], atol=1e-12)

@@ -89,3 +89,62 @@ def obb_overlap_compiled(ca, ra, ha, cb, rb, hb):  # type: ignore[no-untyped-def
         out,
     )
     return out.reshape(batch + (m, k))
+
+
+def _ray_box_flat(o, d, c, rot, h, t0, t1, axis):  # type: ignore[no-untyped-def]
+    """Slab test of rays ``o, d: (B, R, 3)`` against boxes ``c (B, K, 3)``, ``rot (B, K, 3,
+    3)`` (columns = box axes), half sides ``h (B, K, 3)``. Writes the entry and exit
+    parameters ``t0, t1 (B, R, K)`` (``inf, -inf`` for a miss) and the entry axis (the
+    first of the axes whose slab is entered last). A ray parallel to a slab is inside it
+    when its origin is in the closed slab."""
+    inf = np.inf
+    nb, nr, nk = t0.shape
+    for b in range(nb):
+        for k in range(nk):
+            for r in range(nr):
+                lo_max = -inf
+                hi_min = inf
+                ax = 0
+                for i in range(3):
+                    # local coordinates: column i of the rotation
+                    ol = (o[b, r, 0] - c[b, k, 0]) * rot[b, k, 0, i] + (o[b, r, 1] - c[b, k, 1]) * rot[b, k, 1, i] + (o[b, r, 2] - c[b, k, 2]) * rot[b, k, 2, i]
+                    dl = d[b, r, 0] * rot[b, k, 0, i] + d[b, r, 1] * rot[b, k, 1, i] + d[b, r, 2] * rot[b, k, 2, i]
+                    hh = h[b, k, i]
+                    if dl == 0.0:
+                        if -hh <= ol <= hh:
+                            lo, hi = -inf, inf
+                        else:
+                            lo, hi = inf, -inf
+                    else:
+                        ta = (-hh - ol) / dl
+                        tb = (hh - ol) / dl
+                        lo, hi = (ta, tb) if ta <= tb else (tb, ta)
+                    if i == 0 or lo > lo_max:
+                        if i == 0 or lo > lo_max:
+                            ax = i if (i == 0 or lo > lo_max) else ax
+                        lo_max = lo
+                    if hi < hi_min:
+                        hi_min = hi
+                if lo_max > hi_min:
+                    t0[b, r, k] = inf
+                    t1[b, r, k] = -inf
+                else:
+                    t0[b, r, k] = lo_max
+                    t1[b, r, k] = hi_min
+                axis[b, r, k] = ax
+
+
+if HAVE_NUMBA:
+    _ray_box_flat = numba.njit(cache=True, nogil=True, error_model="numpy")(_ray_box_flat)
+
+
+def ray_box_compiled(o, d, c, rot, h):  # type: ignore[no-untyped-def]
+    """Entry/exit parameters and entry axis ``(B, R, K)`` of rays against boxes."""
+    nb, nr = o.shape[:2]
+    nk = c.shape[1]
+    t0 = np.empty((nb, nr, nk))
+    t1 = np.empty((nb, nr, nk))
+    axis = np.empty((nb, nr, nk), np.int8)
+    f = np.ascontiguousarray
+    _ray_box_flat(f(o, dtype=np.float64), f(np.broadcast_to(d, o.shape), dtype=np.float64), f(c, dtype=np.float64), f(rot, dtype=np.float64), f(h, dtype=np.float64), t0, t1, axis)
+    return t0, t1, axis
