@@ -48,6 +48,9 @@ def test_ids_pass_check_env_and_are_seeded(name: str) -> None:
         assert obs["observation"].shape == (256, 6)
         assert set(info) >= {"collided", "is_success", "collision_checks"}
         assert env.unwrapped.robot.name == robot
+    local = gym.make(env_id, robot="sshape", observation="local")
+    check_env(local.unwrapped, skip_render_check=True)
+    assert local.reset(seed=0)[0]["observation"].shape == (64, 6)
 
 
 @pytest.mark.parametrize("name", SCENES)
