@@ -207,3 +207,29 @@ def test_make_planner_and_protocol() -> None:
     assert {"birrt", "straight"} <= set(PLANNERS)
     with pytest.raises(ValueError, match="magic.*birrt.*straight"):
         make_planner("magic", robot)
+
+
+def test_nearest_node_index_matches_a_scan() -> None:
+    """Large trees answer nearest-node queries from a KD-tree: exactly for the sphere (the
+    geodesic distance is Euclidean), nearly always exactly for the S-shape (candidates are
+    re-ranked by the true distance)."""
+    from pointplan.planners.birrt import _Tree
+    from pointplan.robots import make_robot
+
+    rng = np.random.default_rng(0)
+    for name, need in (("sphere3d", 1.0), ("sshape", 0.95)):
+        robot = make_robot(name)
+        lo, hi = np.full(3, -0.6), np.full(3, 0.6)
+        nodes = robot.sample_uniform(rng, 3000, lo, hi)
+        tree = _Tree(nodes[0])
+        tree.add(nodes[1:2000], 0)
+        tree.nearest(robot, nodes[0])  # builds the index over 2,000 nodes
+        tree.add(nodes[2000:], 0)  # 1,000 more, not indexed yet: scanned
+        queries = robot.sample_uniform(rng, 200, lo, hi)
+        same = 0
+        for q in queries:
+            i, v = tree.nearest(robot, q)
+            d = np.linalg.norm(robot.log(tree.nodes[: tree.n], q[None]), axis=1)
+            np.testing.assert_allclose(np.linalg.norm(v), d[i], atol=1e-12)
+            same += bool(d[i] <= d.min() + 1e-12)
+        assert same / len(queries) >= need, (name, same)

@@ -26,8 +26,32 @@ from .base import Array, PlanResult, check_free, edge_configs, march
 _SAMPLE_BLOCK = 256
 
 
+#: trees smaller than this find nearest nodes by a scan; larger ones index older nodes
+_KD_MIN = 512
+#: candidates taken from the index for robots with orientation (re-ranked exactly)
+_KD_CANDIDATES = 16
+
+
+def _embed(robot: Robot, q: Array) -> Array:
+    """Points whose Euclidean distance stands in for the geodesic one: the position, and
+    for oriented robots the unit quaternion (w >= 0) times 2 (its chord is about half the
+    rotation angle)."""
+    q = np.asarray(q, np.float64)
+    if robot.config_dim == robot.dim:
+        return q
+    quat = q[..., robot.dim :]
+    quat = np.where(quat[..., -1:] < 0, -quat, quat)
+    return np.concatenate([q[..., : robot.dim], 2.0 * quat], -1)
+
+
 class _Tree:
-    """Nodes and parents in arrays that double when full."""
+    """Nodes and parents in arrays that double when full, with a nearest-node index.
+
+    Nearest nodes: for robots without orientation the geodesic distance is Euclidean, and a
+    KD-tree over the older nodes plus a scan of the newest ones is exact. For oriented
+    robots the KD-tree (over positions and quaternions) proposes candidates that are
+    re-ranked by the true distance: nearly always the true nearest node, at a cost that
+    grows like log(n) instead of n (a plain scan made 50,000-node searches quadratic)."""
 
     def __init__(self, root: Array, capacity: int = 256) -> None:
         self.nodes = np.empty((capacity, root.shape[0]))
@@ -35,6 +59,8 @@ class _Tree:
         self.nodes[0] = root
         self.parent[0] = -1
         self.n = 1
+        self._kd = None
+        self._kd_n = 0  # nodes [0, _kd_n) are in the index
 
     def add(self, configs: Array, first_parent: int) -> int:
         """Append a chain ``first_parent -> configs[0] -> configs[1] -> ...``; returns the
@@ -55,9 +81,22 @@ class _Tree:
 
     def nearest(self, robot: Robot, q: Array) -> tuple[int, Array]:
         """Index of the node nearest to ``q`` and the twist from it to ``q``."""
-        v = robot.log(self.nodes[: self.n], q[None])
-        i = int(np.argmin(np.einsum("ij,ij->i", v, v)))
-        return i, v[i]
+        if self.n < _KD_MIN:
+            v = robot.log(self.nodes[: self.n], q[None])
+            i = int(np.argmin(np.einsum("ij,ij->i", v, v)))
+            return i, v[i]
+        if self.n >= 2 * self._kd_n:  # rebuild when the tree has doubled
+            from scipy.spatial import cKDTree
+
+            self._kd = cKDTree(_embed(robot, self.nodes[: self.n]))
+            self._kd_n = self.n
+        exact = robot.config_dim == robot.dim
+        assert self._kd is not None
+        _, cand = self._kd.query(_embed(robot, q), k=1 if exact else _KD_CANDIDATES)
+        idx = np.concatenate([np.atleast_1d(cand), np.arange(self._kd_n, self.n)])
+        v = robot.log(self.nodes[idx], q[None])
+        j = int(np.argmin(np.einsum("ij,ij->i", v, v)))
+        return int(idx[j]), v[j]
 
     def branch(self, i: int) -> Array:
         """Configurations from the root to node ``i``."""
