@@ -84,8 +84,9 @@ class Capsule:
 
 
 @dataclass(frozen=True)
-class Cylinder:
-    """Solid cylinder (3D only) around the local z axis of ``rotation``, full ``length``."""
+class _AxialSolid:
+    """A solid of revolution (3D only) about the local z axis of ``rotation``: centre,
+    radius and full ``length`` along the axis (shared by :class:`Cylinder` and :class:`Cone`)."""
 
     center: Array
     radius: float
@@ -105,25 +106,14 @@ class Cylinder:
 
 
 @dataclass(frozen=True)
-class Cone:
+class Cylinder(_AxialSolid):
+    """Solid cylinder (3D only) around the local z axis of ``rotation``, full ``length``."""
+
+
+@dataclass(frozen=True)
+class Cone(_AxialSolid):
     """Solid right circular cone (3D only) around the local z axis of ``rotation``: base disc
     of ``radius`` at ``z = -length/2``, apex at ``z = +length/2`` (coal's convention)."""
-
-    center: Array
-    radius: float
-    length: float
-    rotation: Array = field(default=None)  # type: ignore[assignment]
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "center", _vec(self.center, 3))
-        object.__setattr__(self, "radius", float(self.radius))
-        object.__setattr__(self, "length", float(self.length))
-        rot = np.eye(3) if self.rotation is None else np.asarray(self.rotation, np.float64)
-        object.__setattr__(self, "rotation", rot.reshape(3, 3))
-
-    @property
-    def dim(self) -> int:
-        return 3
 
 
 @dataclass(frozen=True)
