@@ -72,14 +72,15 @@ class Scenario3D(Scenario):
         key = (split, int(index))
         s = self._cache.get(key)
         if s is None:
-            s = self.build(workspace_rng(self.name, split, index))
+            s = self.build(workspace_rng(self.name, split, index), split)
             s.name = f"{self.name}/{split}/{index}"
             self._cache[key] = s
             if len(self._cache) > 512:  # keep recent workspaces (and their observation caches)
                 self._cache.popitem(last=False)
         return s
 
-    def build(self, rng: np.random.Generator) -> Scene:
+    def build(self, rng: np.random.Generator, split: str) -> Scene:
+        """A new workspace of ``split`` drawn from ``rng``."""
         raise NotImplementedError
 
     def _layout(self, rng: np.random.Generator) -> tuple[int, Array, Array, Array]:
@@ -96,7 +97,7 @@ class Boxes3DScenario(Scenario3D):
 
     name = "boxes3d"
 
-    def build(self, rng: np.random.Generator) -> Scene:
+    def build(self, rng: np.random.Generator, split: str) -> Scene:
         n, sizes, centers, rots = self._layout(rng)
         return Scene([Box(centers[i], sizes[i], rots[i]) for i in range(n)], LOW, HIGH)
 
@@ -128,7 +129,7 @@ class Synthetic3DScenario(Scenario3D):
     name = "synthetic3d"
     KINDS = ("capsule", "cylinder", "sphere", "cone")
 
-    def build(self, rng: np.random.Generator) -> Scene:
+    def build(self, rng: np.random.Generator, split: str) -> Scene:
         n, sizes, centers, rots = self._layout(rng)
         kinds = rng.integers(0, len(self.KINDS), n)
         return Scene([synthetic_shape(self.KINDS[k], sizes[i], centers[i], rots[i]) for i, k in enumerate(kinds)], LOW, HIGH)
@@ -154,7 +155,7 @@ class YCB3DScenario(Scenario3D):
         self.names = sorted(self.objects)
         self.max_faces = int(max_faces)
 
-    def build(self, rng: np.random.Generator) -> Scene:
+    def build(self, rng: np.random.Generator, split: str) -> Scene:
         from . import ycb
 
         n, sizes, centers, rots = self._layout(rng)
@@ -174,7 +175,7 @@ class Dynamic3DScenario(Scenario3D):
 
     name = "dynamic3d"
 
-    def build(self, rng: np.random.Generator) -> Scene:
+    def build(self, rng: np.random.Generator, split: str) -> Scene:
         n, sizes, centers, rots = self._layout(rng)
         c = self.config
         targets_c = rng.uniform(-c.center_range, c.center_range, (n, 3))
@@ -232,7 +233,7 @@ class SlotScenario(Scenario3D):
         super().__init__(robot)
         self.slot = config or SlotConfig()
 
-    def build(self, rng: np.random.Generator) -> Scene:
+    def build(self, rng: np.random.Generator, split: str) -> Scene:
         c = self.slot
         width = float(rng.uniform(c.min_width_bars, c.max_width_bars)) * BAR_THICKNESS
         long_axis = int(rng.integers(1, 3))  # 1: slot long along y, 2: along z
@@ -315,13 +316,9 @@ class Qureshi3DScenario(Scenario3D):
     name = "qureshi3d"
     SPLIT_RESIDUES = {"test": (0,), "val": (1,), "train": tuple(range(2, 10))}
 
-    def scene(self, split: str, index: int) -> Scene:
-        self._split = split  # build() needs to know which permutations it may use
-        return super().scene(split, index)
-
-    def build(self, rng: np.random.Generator) -> Scene:
+    def build(self, rng: np.random.Generator, split: str) -> Scene:
         n = len(QURESHI_SIZES)
-        residues = self.SPLIT_RESIDUES[self._split]
+        residues = self.SPLIT_RESIDUES[split]
         block = int(rng.integers(0, math.factorial(n) // 10))
         rank = 10 * block + residues[int(rng.integers(0, len(residues)))]
         perm = unrank_permutation(rank, n)
