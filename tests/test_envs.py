@@ -97,15 +97,25 @@ def test_tiny_moves_are_checked() -> None:
     assert info["collision_checks"] == 1
 
 
-def test_bounds_stop_a_move_without_a_collision() -> None:
-    """A move that would leave the workspace stops at its last sub-step inside, on the
-    commanded line (no sliding along the border), and does not count as a collision."""
+def test_bounds_clip_a_move_without_a_collision() -> None:
+    """A move that would leave the workspace is sent to its end clipped into the bounds
+    (sliding along the border) and does not count as a collision; with ``bounds="stop"`` it
+    ends at its last sub-step inside, on the commanded line."""
     env = PlanningEnv("narrow2d")
+    env.reset(seed=0, options={"problem": Problem(_open_scene(), [0.98, 0.02], [0.1, 0.9])})
+    _, reward, _, _, info = env.step(np.array([1.0, 0.5], np.float32))
+    # the end (1.05, 0.055) is clipped to (1.0, 0.055)
+    assert env.core.q[0] == pytest.approx([1.0, 0.055])
+    assert not info["collided"] and reward == pytest.approx(-np.sqrt(1.25) - 0.1)
+
+    env = PlanningEnv("narrow2d", bounds="stop")
     env.reset(seed=0, options={"problem": Problem(_open_scene(), [0.98, 0.02], [0.1, 0.9])})
     _, reward, _, _, info = env.step(np.array([1.0, -1.0], np.float32))
     # sub-steps of (0.007, -0.007): (0.987, 0.013), (0.994, 0.006), then (1.001, -0.001) is out
     assert env.core.q[0] == pytest.approx([0.994, 0.006])
     assert not info["collided"] and reward == pytest.approx(-np.sqrt(2) - 0.1)
+    with pytest.raises(ValueError, match="bounds"):
+        PlanningEnv("narrow2d", bounds="wrap")
 
 
 def test_observation_is_in_robot_frame() -> None:

@@ -7,7 +7,7 @@ either answer is right there.
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import coal
 import numpy as np
@@ -19,7 +19,15 @@ from hypothesis import strategies as st
 from pointplan.envs.core import q_free
 from pointplan.geometry import lie
 from pointplan.geometry.collision import CollisionWorld
-from pointplan.geometry.shapes import Box, Capsule, Cone, Cylinder, Mesh, PointCloud, Sphere
+from pointplan.geometry.shapes import (
+    Box,
+    Capsule,
+    Cone,
+    Cylinder,
+    Mesh,
+    PointCloud,
+    Sphere,
+)
 from pointplan.robots import Disc2D, SShape
 from pointplan.scenes import narrow2d
 
@@ -552,7 +560,7 @@ def test_mesh_box_matches_box_for_sshape() -> None:
 
 
 # ============================================================================ q_free
-@lru_cache(maxsize=None)
+@cache
 def narrow_ws(i: int):  # type: ignore[no-untyped-def]
     return narrow2d.workspace("train", i)
 
@@ -587,18 +595,24 @@ def test_q_free_stays_free_and_in_bounds(indices: list[int], seed: int, scale: f
         for j, i in enumerate(range(e)[rows]):
             assert not robot.collides(scenes[i].world, new_q[j])
         assert np.all(checks >= 1)
-        # a move that neither collided nor left the bounds ends where it was sent
-        end = q0 + v
-        inside = np.all((end >= lo) & (end <= hi), axis=1)
-        np.testing.assert_allclose(new_q[~collided & inside], end[~collided & inside], atol=1e-12)
-        # and every move ends on its commanded segment (the bounds stop it, no sliding)
-        s_along = np.einsum("ij,ij->i", new_q - q0, v) / np.maximum(np.einsum("ij,ij->i", v, v), 1e-18)
-        np.testing.assert_allclose(new_q, q0 + s_along[:, None] * v, atol=1e-12)
+        # a move that did not collide ends at its target clipped into the bounds
+        end = np.clip(q0 + v, lo, hi)
+        np.testing.assert_allclose(new_q[~collided], end[~collided], atol=1e-12)
+        # and every move ends on the segment towards that target (the one that was checked)
+        d = end - q0
+        s_along = np.einsum("ij,ij->i", new_q - q0, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-18)
+        np.testing.assert_allclose(new_q, q0 + s_along[:, None] * d, atol=1e-12)
         assert np.all((s_along >= -1e-9) & (s_along <= 1 + 1e-9))
-        assert np.all(s_along[~inside & ~collided] < 1)
         # nothing moves further than its twist
         step = np.linalg.norm(new_q - q0, axis=1)
         assert np.all(step <= np.linalg.norm(v, axis=1) + 1e-12)
+        # without clipping the target, the bounds stop a move on its commanded segment instead
+        stop_q, stop_col, _ = q_free(robot, world, q0, v, lo, hi, clip_target=False)
+        assert np.all(stop_q >= lo) and np.all(stop_q <= hi)
+        s_cmd = np.einsum("ij,ij->i", stop_q - q0, v) / np.maximum(np.einsum("ij,ij->i", v, v), 1e-18)
+        np.testing.assert_allclose(stop_q, q0 + s_cmd[:, None] * v, atol=1e-12)
+        inside = np.all((q0 + v >= lo) & (q0 + v <= hi), axis=1)
+        assert np.all(s_cmd[~inside & ~stop_col] < 1)
 
 
 @given(
@@ -643,6 +657,8 @@ def test_q_free_clips_to_bounds() -> None:
     q = np.clip(q, 0.02, 0.98)
     q = q[~robot.collides(scene.world, q)]
     twist = np.where(q > 0.5, 0.07, -0.07)  # straight out of the square
-    new_q, _, _ = q_free(robot, scene.world, q, twist, np.zeros((len(q), 2)), np.ones((len(q), 2)))
+    new_q, collided, _ = q_free(robot, scene.world, q, twist, np.zeros((len(q), 2)), np.ones((len(q), 2)))
     assert np.all(new_q >= 0) and np.all(new_q <= 1)
     assert not robot.collides(scene.world, new_q).any()
+    # a free move ends on the border it was pushed against
+    np.testing.assert_allclose(new_q[~collided], np.clip(q + twist, 0, 1)[~collided], atol=1e-12)

@@ -159,11 +159,45 @@ def test_actor_delay_keeps_the_actor_still() -> None:
     assert not all(torch.equal(a, b) for a, b in zip(before, sac.actor.head.parameters()))
 
 
+def test_policy_average_is_an_exponential_average_of_the_actor(tmp_path: Path) -> None:
+    """With ``policy_avg`` the averaged actor moves by ``rate`` towards the actor after every
+    update, is what the run saves as its policy, and survives a resume."""
+    from pointplan.learning.checkpoint import load_checkpoint
+    from pointplan.learning.sac import SAC, SACConfig
+
+    rng = np.random.default_rng(0)
+    env = PlanningEnv("narrow2d")
+    buf = EpisodeReplay(500, (64, 4), 2, 2)
+    _collect(env, buf, 2, rng)
+    rate = 0.25
+    sac = SAC(env.robot, EnvConfig(), (64, 4), SMALL, SACConfig(batch_size=32, policy_avg=rate))
+    assert sac.policy_actor is sac.actor_avg
+    for _ in range(3):
+        before = {k: v.clone() for k, v in sac.actor_avg.state_dict().items()}
+        sac.update(buf.sample(32, rng))
+        now = sac.actor.state_dict()
+        for k, v in sac.actor_avg.state_dict().items():
+            torch.testing.assert_close(v, (1 - rate) * before[k] + rate * now[k])
+    assert any(not torch.equal(v, sac.actor.state_dict()[k]) for k, v in sac.actor_avg.state_dict().items())
+    # without averaging there is no second actor
+    plain = SAC(env.robot, EnvConfig(), (64, 4), SMALL, SACConfig(batch_size=32))
+    assert plain.actor_avg is None and plain.policy_actor is plain.actor
+
+    cfg = TrainConfig(env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, eval_every=400, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32, policy_avg=0.01))
+    train(cfg, tmp_path / "a", progress=False)
+    state = load_checkpoint(tmp_path / "a" / "last.pt")
+    saved, avg = state["actor"], state["trainer"]["agent"]["actor_avg"]
+    assert all(torch.equal(saved[k], avg[k]) for k in saved)  # the policy on disk is the average
+    assert not all(torch.equal(saved[k], state["trainer"]["agent"]["actor"][k]) for k in saved)
+    again = SAC(env.robot, EnvConfig(), (64, 4), SMALL, SACConfig(batch_size=32, policy_avg=0.01))
+    again.load_state_dict(state["trainer"]["agent"])
+    assert all(torch.equal(v, avg[k]) for k, v in again.actor_avg.state_dict().items())
+
+
 def test_training_resumes_from_last_checkpoint(tmp_path: Path) -> None:
     from dataclasses import replace
 
     from pointplan.learning.checkpoint import load_checkpoint
-
     from pointplan.learning.sac import SACConfig
 
     cfg = TrainConfig(env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, updates_per_step=0.25, eval_every=200, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32))

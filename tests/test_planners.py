@@ -9,8 +9,16 @@ import pytest
 
 from pointplan.evaluation import check_path, densify
 from pointplan.geometry.shapes import Box
-from pointplan.planners import PLANNERS, BiRRT, PlanResult, Planner, StraightLine, make_planner, path_length
-from pointplan.robots import Disc2D, SShape, Sphere3D
+from pointplan.planners import (
+    PLANNERS,
+    BiRRT,
+    Planner,
+    PlanResult,
+    StraightLine,
+    make_planner,
+    path_length,
+)
+from pointplan.robots import Disc2D, Sphere3D, SShape
 from pointplan.scenes import Problem, Scene
 from pointplan.scenes.scenarios import Narrow2DScenario
 

@@ -5,8 +5,9 @@ from __future__ import annotations
 import copy
 import json
 import re
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import pytest
@@ -173,7 +174,7 @@ def test_example_file_loads() -> None:
 
 
 def _json_blocks(text: str) -> list[dict[str, Any]]:
-    return [json.loads(b) for b in re.findall(r"```json\n(.*?)```", text, flags=re.S)]
+    return [json.loads(b) for b in re.findall(r"```json\n(.*?)```", text, flags=re.DOTALL)]
 
 
 def test_documented_examples_load(tmp_path: Path) -> None:

@@ -11,13 +11,17 @@ from gymnasium.utils.env_checker import check_env
 import pointplan  # noqa: F401  (registers the ids)
 from pointplan.envs import ENV_IDS
 from pointplan.evaluation.evaluate import check_path, timed_path
-from pointplan.geometry.collision import point_cone_sqdist, point_cylinder_sqdist, point_segment_sqdist
+from pointplan.geometry.collision import (
+    point_cone_sqdist,
+    point_cylinder_sqdist,
+    point_segment_sqdist,
+)
 from pointplan.geometry.shapes import Box, Capsule, Cone, Cylinder, Mesh, Sphere
 from pointplan.planners import make_planner
 from pointplan.robots import make_robot
 from pointplan.scenes.scenarios import make_scenario
-from pointplan.scenes.scenes3d import SCENARIOS_3D, SlotConfig, SlotScenario
 from pointplan.scenes.scene import DynamicScene
+from pointplan.scenes.scenes3d import SCENARIOS_3D, SlotConfig, SlotScenario
 
 SCENES = list(SCENARIOS_3D)
 STATIC = [s for s in SCENES if s != "dynamic3d"]
@@ -127,7 +131,7 @@ def test_qureshi_sizes_are_permuted_at_fixed_centres() -> None:
     assert any(not np.array_equal(x.size, y.size) for x, y in zip(a, b))
     assert all(np.array_equal(o.rotation, np.eye(3)) for o in a)
     # only 10! layouts exist: the splits own disjoint sets of them
-    def layout(scene):  # noqa: ANN001, ANN202
+    def layout(scene):
         return tuple(tuple(o.size) for o in scene.obstacles)
 
     test = {layout(sc.scene("test", i)) for i in range(200)}
@@ -208,9 +212,7 @@ def test_local_rays_hit_surfaces_facing_the_rays(robot: str) -> None:
     shapes = list(problem.scene.obstacles) + __import__("pointplan.observers.rays", fromlist=["wall_slabs"]).wall_slabs(problem.scene.low, problem.scene.high)
     d2 = []
     for s in shapes:
-        if isinstance(s, Box):
-            d2.append(surface_gap(s, p) ** 2)
-        elif isinstance(s, Sphere):
+        if isinstance(s, Box) or isinstance(s, Sphere):
             d2.append(surface_gap(s, p) ** 2)
         elif isinstance(s, Capsule):
             d2.append((np.sqrt(point_segment_sqdist(p, s.a[None], s.b[None])[:, 0]) - s.radius) ** 2)

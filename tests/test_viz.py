@@ -16,8 +16,14 @@ from pointplan.geometry.shapes import Box, Capsule, PointCloud, Sphere
 from pointplan.robots import Disc2D
 from pointplan.scenes import Problem, Scene
 from pointplan.scenes.scenarios import Narrow2DScenario
-from pointplan.viz import draw_problem, grid_figsize, render_grid, render_problem, render_rgb
-from pointplan.viz import plot2d
+from pointplan.viz import (
+    draw_problem,
+    grid_figsize,
+    plot2d,
+    render_grid,
+    render_problem,
+    render_rgb,
+)
 
 
 @dataclass

@@ -6,8 +6,9 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -253,7 +254,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         for name in ("updates_per_step", "eval_every", "eval_episodes", "target_success", "device"):
             if getattr(args, name) is not None:
                 over[name] = getattr(args, name)
-        sac_over = {k: getattr(args, k) for k in ("lr", "batch_size") if getattr(args, k) is not None}
+        sac_over = {k: getattr(args, k) for k in ("lr", "batch_size", "policy_avg") if getattr(args, k) is not None}
         if sac_over:
             over["sac"] = SACConfig(**{**cfg.sac.__dict__, **sac_over})
         cfg = TrainConfig(**{**cfg.__dict__, **over})
@@ -271,7 +272,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             seed=args.seed,
             device=args.device or "cpu",
             net=_net_config(args),
-            sac=SACConfig(batch_size=args.batch_size or 256, lr=args.lr or 3e-4, init_alpha=args.init_alpha, actor_delay=args.actor_delay),
+            sac=SACConfig(batch_size=args.batch_size or 256, lr=args.lr or 3e-4, init_alpha=args.init_alpha, actor_delay=args.actor_delay, policy_avg=args.policy_avg or 0.0),
             init_actor=args.init_actor,
         )
     res = train(cfg, args.run_dir, progress=not args.quiet, resume=args.resume)
@@ -364,6 +365,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--init-actor", help="start the actor from this checkpoint (e.g. a BC one)")
     p.add_argument("--init-alpha", type=float, default=1.0, help="initial entropy temperature (default: %(default)s)")
     p.add_argument("--actor-delay", type=int, default=0, help="critic-only updates before the actor moves (default: %(default)s)")
+    p.add_argument("--policy-avg", type=float, help="rate of a running average of the actor's weights, evaluated and saved as the policy (default: 0, off; e.g. 3e-5)")
     p.add_argument("--resume", help="continue a run from its last.pt")
     p.set_defaults(func=cmd_train)
 

@@ -56,4 +56,4 @@ def register_envs() -> None:
         )
 
 
-__all__ = ["BatchedCore", "EnvConfig", "PlanningEnv", "PlanningVectorEnv", "q_free", "register_envs", "make_env", "make_vector_env", "ENV_IDS"]
+__all__ = ["ENV_IDS", "BatchedCore", "EnvConfig", "PlanningEnv", "PlanningVectorEnv", "make_env", "make_vector_env", "q_free", "register_envs"]

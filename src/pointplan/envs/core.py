@@ -6,8 +6,9 @@ environment, one observer call observes them all.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,6 +44,13 @@ class EnvConfig:
     reward_free: float = -0.1
     reward_collision: float = -4.0
     reward_success: float = 20.0
+    #: a move that would leave the workspace: ``clip`` sends it to its end clipped into the
+    #: bounds (sliding along the border, checked); ``stop`` ends it at the border
+    bounds: str = "clip"
+
+    def __post_init__(self) -> None:
+        if self.bounds not in ("clip", "stop"):
+            raise ValueError(f"bounds must be 'clip' or 'stop', not {self.bounds!r}")
 
 
 def q_free(
@@ -53,20 +61,32 @@ def q_free(
     low: Array,
     high: Array,
     substep: float = 0.01,
+    clip_target: bool = True,
 ) -> tuple[Array, Bool, NDArray[np.int64]]:
     """Walk ``q -> q * exp(twist)`` in sub-steps of at most ``substep`` and stop at the last
     free one inside the bounds.
 
     ``q: (E, config_dim)``, ``twist: (E, twist_dim)``, ``world`` stacked over ``E`` (or a
-    single world), ``low, high: (E, d)``. The bounds stop a move like an obstacle does, but
+    single world), ``low, high: (E, d)``. With ``clip_target`` (the default) a move whose
+    end leaves the bounds is sent to its end clipped into the bounds instead (the twist
+    becomes ``log(q^-1 clip(q exp(twist)))``), so a robot pushing against the border slides
+    along it, like the paper's clipping, but on a path that is checked. The bounds then
+    stop a move like an obstacle does (only an SE(3) screw motion can bulge out on its way),
     without counting as a collision: the robot ends at the last sub-step before the first
-    one that collides or leaves the bounds. So the executed motion is always a piece of the
-    commanded geodesic (what the evaluator re-checks) and stays inside the bounds. Returns
+    one that collides or leaves the bounds. So the executed motion is always a piece of one
+    geodesic from ``q`` (what the evaluator re-checks) and stays inside the bounds. Returns
     the new configurations, whether the move was stopped by a collision, and the number of
     collision checks per environment. A move shorter than ``substep`` is still checked.
     """
     q = np.asarray(q, np.float64)
     twist = np.asarray(twist, np.float64)
+    if clip_target:
+        target = robot.integrate(q, twist)
+        clipped = robot.clip(target, low, high)
+        moved = np.any(clipped != target, axis=-1)
+        if moved.any():  # aim at the clipped target instead: slide along the border, checked
+            twist = twist.copy()
+            twist[moved] = robot.log(q[moved], clipped[moved])
     norm = np.linalg.norm(twist, axis=-1)
     n = np.maximum(1, np.ceil(norm / substep - 1e-9)).astype(np.int64)
     nmax = int(n.max())
@@ -182,7 +202,7 @@ class BatchedCore:
         twist = a * self.robot.action_scale
         # a move from step t to t + 1 is checked against the obstacles at t + 1
         world = self.world_at(self.t + 1)
-        self.q, collided, checks = q_free(self.robot, world, self.q, twist, self.low, self.high, self.config.substep)
+        self.q, collided, checks = q_free(self.robot, world, self.q, twist, self.low, self.high, self.config.substep, clip_target=self.config.bounds == "clip")
         crushed = np.zeros(self.num_envs, dtype=bool)
         if world is not self._world:  # moving obstacles: one may have run into the robot
             crushed = self.robot.collides(world, self.q[:, None])[:, 0]

@@ -1,5 +1,13 @@
 """Evaluation: independent path checks, per-problem records and summary metrics."""
 
-from .evaluate import EpisodeRecord, EvalReport, check_path, densify, evaluate, format_table, path_length
+from .evaluate import (
+    EpisodeRecord,
+    EvalReport,
+    check_path,
+    densify,
+    evaluate,
+    format_table,
+    path_length,
+)
 
 __all__ = ["EpisodeRecord", "EvalReport", "check_path", "densify", "evaluate", "format_table", "path_length"]

@@ -123,8 +123,7 @@ def _ray_box_flat(o, d, c, rot, h, t0, t1, axis):  # type: ignore[no-untyped-def
                         if i == 0 or lo > lo_max:
                             ax = i if (i == 0 or lo > lo_max) else ax
                         lo_max = lo
-                    if hi < hi_min:
-                        hi_min = hi
+                    hi_min = min(hi_min, hi)
                 if lo_max > hi_min:
                     t0[b, r, k] = inf
                     t1[b, r, k] = -inf

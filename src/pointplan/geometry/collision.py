@@ -14,8 +14,9 @@ through coal.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -202,7 +203,7 @@ class CollisionWorld:
 
     # ------------------------------------------------------------------ build
     @classmethod
-    def from_shapes(cls, shapes: Sequence[Shape], dim: int) -> "CollisionWorld":
+    def from_shapes(cls, shapes: Sequence[Shape], dim: int) -> CollisionWorld:
         """Pack world-frame shapes of one scene."""
         boxes = [s for s in shapes if isinstance(s, Box)]
         spheres = [s for s in shapes if isinstance(s, Sphere)]
@@ -254,7 +255,7 @@ class CollisionWorld:
         )
 
     @classmethod
-    def stack(cls, worlds: Sequence["CollisionWorld"]) -> "CollisionWorld":
+    def stack(cls, worlds: Sequence[CollisionWorld]) -> CollisionWorld:
         """Stack single-scene worlds into one with batch shape ``(E,)``, padding each group."""
         if not worlds:
             raise ValueError("nothing to stack")

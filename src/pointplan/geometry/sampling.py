@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -138,7 +138,7 @@ def interior_points(shapes: Sequence[Shape], spacing: float, low: Array, high: A
 
 
 # ------------------------------------------------------------------ area-weighted (3D)
-def shape_to_trimesh(s: Shape, sections: int = 32) -> "trimesh.Trimesh":  # type: ignore[name-defined]  # noqa: F821
+def shape_to_trimesh(s: Shape, sections: int = 32) -> trimesh.Trimesh:  # type: ignore[name-defined]  # noqa: F821
     """A triangle mesh of a 3D shape in the world frame (primitives tessellated)."""
     import trimesh
 
@@ -238,7 +238,12 @@ def area_weighted_points(shapes: Sequence[Shape], n: int, rng: np.random.Generat
 
 def _hidden(p: Array, owner: NDArray[np.int64], shapes: Sequence[Shape], eps: float = 1e-6) -> NDArray[np.bool_]:
     """Is each point strictly inside (by more than ``eps``) an obstacle other than its own?"""
-    from .collision import mesh_contains, point_cone_sqdist, point_cylinder_sqdist, point_segment_sqdist
+    from .collision import (
+        mesh_contains,
+        point_cone_sqdist,
+        point_cylinder_sqdist,
+        point_segment_sqdist,
+    )
 
     out = np.zeros(len(p), dtype=bool)
     for k, s in enumerate(shapes):

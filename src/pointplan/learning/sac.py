@@ -38,6 +38,10 @@ class SACConfig:
     #: critic-only updates before the actor and temperature start to move (useful when the
     #: actor starts from behavioural cloning and the critic from scratch)
     actor_delay: int = 0
+    #: rate of a running (exponential) average of the actor's weights, updated after every
+    #: gradient step; when > 0 the averaged actor is the one evaluated and saved as the policy
+    #: (0: off). 3e-5 averages over roughly the last 30,000 updates.
+    policy_avg: float = 0.0
 
 
 def batch_rewards(robot: Robot, env: EnvConfig, b: Batch) -> tuple[np.ndarray, np.ndarray]:
@@ -65,6 +69,18 @@ class SAC:
         self.alpha_opt = torch.optim.Adam([self.log_alpha], lr=cfg.lr)
         self.target_entropy = cfg.target_entropy_scale * robot.twist_dim
         self.updates = 0
+        #: the running average of the actor (weights and encoder), or None when off
+        self.actor_avg = self._new_average() if cfg.policy_avg > 0 else None
+
+    def _new_average(self) -> nn.Module:
+        avg = copy.deepcopy(self.actor).requires_grad_(False).eval()
+        avg.detach_encoder = False  # its encoder is its own copy
+        return avg
+
+    @property
+    def policy_actor(self) -> nn.Module:
+        """The actor that evaluation and checkpoints use: the averaged one when kept."""
+        return self.actor_avg if self.actor_avg is not None else self.actor
 
     # ------------------------------------------------------------------ helpers
     def tensor(self, x: np.ndarray) -> torch.Tensor:
@@ -77,9 +93,12 @@ class SAC:
         return self.tensor(obs_input(self.robot, obs))
 
     @torch.no_grad()
-    def act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray, deterministic: bool = False) -> np.ndarray:
+    def act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray, deterministic: bool = False, averaged: bool = False) -> np.ndarray:
+        """Actions for collection (sampled) or evaluation (``deterministic``); ``averaged``
+        uses the running average of the actor when one is kept."""
         o, g = self.observations(obs), self.goal_vectors(q, goal)
-        a = self.actor.act(o, g) if deterministic else self.actor.sample(o, g)[0]
+        actor = self.policy_actor if averaged else self.actor
+        a = actor.act(o, g) if deterministic else actor.sample(o, g)[0]
         return a.cpu().numpy()
 
     # ------------------------------------------------------------------ update
@@ -107,6 +126,7 @@ class SAC:
 
         if self.updates < self.cfg.actor_delay:
             self._soft_update()
+            self._average()
             self.updates += 1
             return {"critic_loss": critic_loss.item(), "alpha": float(alpha), "q_mean": q1.mean().item()}
 
@@ -128,6 +148,7 @@ class SAC:
         self.alpha_opt.step()
 
         self._soft_update()
+        self._average()
         self.updates += 1
         return {
             "critic_loss": critic_loss.item(),
@@ -142,6 +163,17 @@ class SAC:
         for p, pt in zip(self.critic.parameters(), self.critic_target.parameters()):
             pt.mul_(1 - self.cfg.tau).add_(p, alpha=self.cfg.tau)
 
+    @torch.no_grad()
+    def _average(self) -> None:
+        if self.actor_avg is None:
+            return
+        rate = self.cfg.policy_avg
+        for pa, p in zip(self.actor_avg.state_dict().values(), self.actor.state_dict().values()):
+            if pa.dtype.is_floating_point:
+                pa.mul_(1 - rate).add_(p, alpha=rate)
+            else:
+                pa.copy_(p)
+
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict[str, Any]:
         return {
@@ -153,6 +185,7 @@ class SAC:
             "critic_opt": self.critic_opt.state_dict(),
             "alpha_opt": self.alpha_opt.state_dict(),
             "updates": self.updates,
+            **({"actor_avg": self.actor_avg.state_dict()} if self.actor_avg is not None else {}),
         }
 
     def set_lr(self, lr: float) -> None:
@@ -171,3 +204,5 @@ class SAC:
         self.critic_opt.load_state_dict(state["critic_opt"])
         self.alpha_opt.load_state_dict(state["alpha_opt"])
         self.updates = int(state["updates"])
+        if self.actor_avg is not None:  # a run that kept no average starts one from its actor
+            self.actor_avg.load_state_dict(state.get("actor_avg", state["actor"]))

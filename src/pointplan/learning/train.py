@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import csv
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import torch
@@ -109,7 +110,7 @@ def _checkpoint_payload(cfg: TrainConfig, agent: SAC, obs_shape: tuple[int, ...]
         "obs_shape": list(obs_shape),
         "net": to_dict(cfg.net),
         "train_config": to_dict(cfg),
-        "actor": agent.actor.state_dict(),
+        "actor": agent.policy_actor.state_dict(),
         **extra,
     }
 
@@ -216,7 +217,11 @@ def train(
         if steps >= next_eval or steps >= cfg.total_steps:
             next_eval += cfg.eval_every
             agent.actor.eval()
-            res = rollout_batch(lambda o, qq, g: agent.act(o, qq, g, deterministic=True), robot, env_cfg, val_problems, scenario.horizon, seed=cfg.seed)
+            res = rollout_batch(lambda o, qq, g: agent.act(o, qq, g, deterministic=True, averaged=True), robot, env_cfg, val_problems, scenario.horizon, seed=cfg.seed)
+            raw: dict[str, float] = {}
+            if agent.actor_avg is not None:  # the current actor too, for comparison
+                res_raw = rollout_batch(lambda o, qq, g: agent.act(o, qq, g, deterministic=True), robot, env_cfg, val_problems, scenario.horizon, seed=cfg.seed)
+                raw["val_success_current"] = float(np.mean([r.success for r in res_raw]))
             agent.actor.train()
             val = float(np.mean([r.success for r in res]))
             nodes_all = float(np.mean([r.nodes for r in res]))
@@ -230,6 +235,7 @@ def train(
                 "val_success": val,
                 "train_success": float(np.mean(recent)) if recent else 0.0,
                 "val_nodes": float(np.mean([r.nodes for r in res if r.success])) if any(r.success for r in res) else 0.0,
+                **raw,
                 **{k: float(v) for k, v in last_losses.items()},
             }
             history.append(row)

@@ -47,7 +47,7 @@ class Policy:
         return str(self.meta["env"])
 
     @classmethod
-    def from_checkpoint(cls, path: str | Path, device: str = "cpu") -> "Policy":
+    def from_checkpoint(cls, path: str | Path, device: str = "cpu") -> Policy:
         data = load_checkpoint(path, device)
         robot = make_robot(data["robot"])
         net = net_config_from_dict(data["net"])

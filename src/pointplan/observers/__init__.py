@@ -7,8 +7,8 @@ from typing import Any
 from ..robots.base import Robot
 from .base import Observer, PointSetObserver
 from .image import OccupancyImage
-from .rays import LocalRays
 from .points import GlobalPoints, InteriorPoints, SurfaceNormals, SurfacePoints
+from .rays import LocalRays
 
 OBSERVERS: dict[str, type[Observer]] = {
     "surface": SurfacePoints,
@@ -30,4 +30,4 @@ def make_observer(name: str, robot: Robot, **kwargs: Any) -> Observer:
     return cls(robot, **kwargs)  # type: ignore[call-arg]
 
 
-__all__ = ["Observer", "PointSetObserver", "GlobalPoints", "LocalRays", "OccupancyImage", "InteriorPoints", "SurfaceNormals", "SurfacePoints", "OBSERVERS", "make_observer"]
+__all__ = ["OBSERVERS", "GlobalPoints", "InteriorPoints", "LocalRays", "Observer", "OccupancyImage", "PointSetObserver", "SurfaceNormals", "SurfacePoints", "make_observer"]

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from ..robots.base import Robot
-from .base import PlanResult, Planner, march, path_length
+from .base import Planner, PlanResult, march, path_length
 from .birrt import BiRRT
 from .straight import StraightLine
 
@@ -44,13 +45,13 @@ def make_planner(name: str, robot: Robot, **kw: Any) -> Planner:
 
 
 __all__ = [
+    "PLANNERS",
+    "BiRRT",
     "PlanResult",
     "Planner",
-    "BiRRT",
     "StraightLine",
-    "PLANNERS",
-    "register_planner",
     "make_planner",
     "march",
     "path_length",
+    "register_planner",
 ]

@@ -40,7 +40,7 @@ class PlanResult:
     raw_path: Array | None = None
 
     @classmethod
-    def failure(cls, config_dim: int, nodes: int, collision_checks: int, time_s: float, **kw: object) -> "PlanResult":
+    def failure(cls, config_dim: int, nodes: int, collision_checks: int, time_s: float, **kw: object) -> PlanResult:
         """A failed query: empty path, ``success=False``."""
         return cls(np.zeros((0, config_dim)), False, int(nodes), int(collision_checks), float(time_s), **kw)  # type: ignore[arg-type]
 

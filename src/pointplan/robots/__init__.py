@@ -15,4 +15,4 @@ def make_robot(name: str) -> Robot:
         raise ValueError(f"unknown robot {name!r}; known: {', '.join(ROBOTS)}") from None
 
 
-__all__ = ["BodyParts", "Robot", "Disc2D", "Sphere3D", "SShape", "ROBOTS", "make_robot"]
+__all__ = ["ROBOTS", "BodyParts", "Disc2D", "Robot", "SShape", "Sphere3D", "make_robot"]

@@ -29,9 +29,10 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NoReturn, Sequence
+from typing import Any, NoReturn
 
 import numpy as np
 from numpy.typing import NDArray
@@ -238,8 +239,8 @@ class _Reader:
             self.fail(_join(where, "type"), f"unknown obstacle type {_show(kind)}; known: {', '.join(OBSTACLE_TYPES)}")
         if kind in ("cylinder", "mesh") and dim != 3:
             self.fail(_join(where, "type"), f"{kind} obstacles need a 3D scene (dim is {dim})")
-        at = lambda key: _join(where, key)  # noqa: E731
-        need = lambda key: self.get(entry, key, where)  # noqa: E731
+        at = lambda key: _join(where, key)
+        need = lambda key: self.get(entry, key, where)
 
         if kind == "box":
             rot_key = "angle" if dim == 2 else "quaternion"

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import zlib
 from abc import ABC, abstractmethod
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -118,8 +118,7 @@ def make_scenario(name: str, robot: str | Robot | None = None, **kwargs: object)
     from .scenes3d import SCENARIOS_3D
 
     key = name.lower().split("/")[-1]
-    if key.endswith("-v0"):
-        key = key[:-3]
+    key = key.removesuffix("-v0")
     key = key.replace("-", "").replace("_", "")
     if key in SCENARIOS_3D:
         return SCENARIOS_3D[key](robot=robot, **kwargs)
