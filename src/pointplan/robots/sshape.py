@@ -2,9 +2,16 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..geometry import lie
+from ..geometry._se3_kernels import (
+    HAVE_NUMBA,
+    pose_integrate_compiled,
+    pose_log_compiled,
+)
 from .base import Array, BodyParts, Robot
 
 #: centreline corners of the S-shape, body frame (from the paper's release)
@@ -20,6 +27,23 @@ S_CORNERS = np.array(
 )
 BAR_THICKNESS = 0.036
 BAR_LENGTH = 0.2
+
+
+def _flat_pair(a: Array, b: Array, da: int, db: int) -> tuple[tuple[int, ...], Array, Array]:
+    """Broadcast ``a (..., da)`` and ``b (..., db)`` on their leading dimensions; returns the
+    common batch shape and both as C-contiguous float64 ``(N, d)`` arrays (what the compiled
+    kernels read: they index without bounds checks, so the last dimensions are checked)."""
+    a = np.asarray(a, np.float64)
+    b = np.asarray(b, np.float64)
+    if a.shape[-1:] != (da,) or b.shape[-1:] != (db,):
+        raise ValueError(f"expected shapes (..., {da}) and (..., {db}), got {a.shape} and {b.shape}")
+    batch = np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    n = math.prod(batch)
+    if a.shape[:-1] != batch:
+        a = np.broadcast_to(a, batch + (da,))
+    if b.shape[:-1] != batch:
+        b = np.broadcast_to(b, batch + (db,))
+    return batch, np.ascontiguousarray(a.reshape(n, da)), np.ascontiguousarray(b.reshape(n, db))
 
 
 def _bars() -> BodyParts:
@@ -69,11 +93,29 @@ class SShape(Robot):
         t = np.asarray(t, np.float64)
         return np.concatenate([t[..., :3, 3], lie.matrix_to_quat(t[..., :3, :3])], -1)
 
+    # integrate and log take the compiled quaternion kernels when numba is there (10-40x
+    # faster for the 1 to 256 configurations a planner passes per call); the numpy
+    # versions through 4x4 matrices are the reference, and what runs without numba.
+    # Tests and benchmarks select them by setting this module's HAVE_NUMBA to False.
     def integrate(self, q: Array, v: Array) -> Array:
-        return self.from_matrix(self.to_matrix(q) @ lie.se3_exp(v))
+        if not HAVE_NUMBA:
+            return self._integrate_numpy(q, v)
+        batch, qf, vf = _flat_pair(q, v, 7, 6)
+        return pose_integrate_compiled(qf, vf).reshape(batch + (7,))
 
     def log(self, q0: Array, q1: Array) -> Array:
-        return lie.relative_twist(self.to_matrix(q0), self.to_matrix(q1))
+        if not HAVE_NUMBA:
+            return self._log_numpy(q0, q1)
+        batch, af, bf = _flat_pair(q0, q1, 7, 7)
+        return pose_log_compiled(af, bf).reshape(batch + (6,))
+
+    @classmethod
+    def _integrate_numpy(cls, q: Array, v: Array) -> Array:
+        return cls.from_matrix(cls.to_matrix(q) @ lie.se3_exp(v))
+
+    @classmethod
+    def _log_numpy(cls, q0: Array, q1: Array) -> Array:
+        return lie.relative_twist(cls.to_matrix(q0), cls.to_matrix(q1))
 
     def rotations(self, q: Array) -> Array:
         return lie.quat_to_matrix(np.asarray(q, np.float64)[..., 3:])

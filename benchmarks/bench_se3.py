@@ -1,0 +1,68 @@
+"""Calls per second of the S-shape's ``integrate`` and ``log``: compiled quaternion kernels
+versus the numpy path through 4x4 matrices.
+
+    python benchmarks/bench_se3.py            # N = 1, 16, 256 configurations per call
+    python benchmarks/bench_se3.py --quick    # shorter timings
+
+Planners call these with a few configurations at a time (Bi-RRT: one nearest-node query
+or one march per call), where numpy's per-call overhead dominates. The inputs are shaped
+like the planner's: ``integrate(q0[None], v)`` (one start, N steps) and
+``log(nodes, q[None])`` (N nodes against one sample).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from pointplan.geometry._se3_kernels import HAVE_NUMBA
+from pointplan.robots import SShape, sshape
+
+
+def calls_per_second(fn: Callable[[], object], budget: float) -> float:
+    """Repeat ``fn`` in growing batches until ``budget`` seconds have been spent."""
+    fn()  # warm-up (compilation, caches)
+    calls, spent, batch = 0, 0.0, 1
+    while spent < budget:
+        t = time.perf_counter()
+        for _ in range(batch):
+            fn()
+        spent += time.perf_counter() - t
+        calls += batch
+        batch *= 2
+    return calls / spent
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="0.1 s per measurement instead of 0.5 s")
+    args = parser.parse_args()
+    if not HAVE_NUMBA:
+        raise SystemExit("numba is not installed: there is no compiled path to compare")
+    budget = 0.1 if args.quick else 0.5
+    robot = SShape()
+    rng = np.random.default_rng(0)
+    print(f"{'op':<10}{'N':>5}{'compiled /s':>14}{'numpy /s':>12}{'ratio':>8}")
+    for n in (1, 16, 256):
+        nodes = np.concatenate([rng.uniform(-1, 1, (n, 3)), robot.sample_orientation(rng, n)], -1)
+        q = nodes[0]
+        v = rng.normal(size=(n, 6)) * robot.action_scale
+        cases: dict[str, Callable[[], object]] = {
+            "integrate": lambda q=q, v=v: robot.integrate(q[None], v),
+            "log": lambda q=q, nodes=nodes: robot.log(nodes, q[None]),
+        }
+        for op, fn in cases.items():
+            compiled = calls_per_second(fn, budget)
+            sshape.HAVE_NUMBA = False
+            try:
+                plain = calls_per_second(fn, budget)
+            finally:
+                sshape.HAVE_NUMBA = True
+            print(f"{op:<10}{n:>5}{compiled:>14,.0f}{plain:>12,.0f}{compiled / plain:>7.1f}x")
+
+
+if __name__ == "__main__":
+    main()
