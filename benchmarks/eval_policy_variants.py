@@ -54,7 +54,10 @@ def main() -> int:
     torch.set_num_threads(args.threads)
 
     paths = args.checkpoints or [str(shipped_checkpoint())]
-    policies = {Path(p).name: Policy.from_checkpoint(p) for p in paths}
+    names = [Path(p).name for p in paths]
+    if len(set(names)) < len(names):  # e.g. runs/a/best.pt and runs/b/best.pt
+        names = [str(Path(p).parent.name + "/" + Path(p).name) for p in paths]
+    policies = {n: Policy.from_checkpoint(p) for n, p in zip(names, paths)}
     if args.average:
         policies[f"average of {len(paths)}"] = average_policy(paths)
     first = next(iter(policies.values()))

@@ -27,6 +27,8 @@ def main() -> None:
     ap.add_argument("csv", nargs="+", type=Path)
     ap.add_argument("--labels", nargs="*")
     ap.add_argument("--offsets", nargs="*", type=float, help="seconds to add to each run's wall time (e.g. BC time)")
+    ap.add_argument("--ymin", type=float, default=0.0, help="lower end of the success axis (e.g. 0.95 to see late training)")
+    ap.add_argument("--from-steps", type=float, default=0.0, help="leave out evaluations before this many env steps")
     ap.add_argument("-o", "--output", default="training.png")
     args = ap.parse_args()
     labels = args.labels or [p.parent.name for p in args.csv]
@@ -34,13 +36,17 @@ def main() -> None:
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     for path, label, off in zip(args.csv, labels, offsets):
         d = read(path, off)
+        keep = [i for i, n in enumerate(d["env_steps"]) if n >= args.from_steps]
+        d = {k: [v[i] for i in keep] for k, v in d.items()}
+        if not keep:
+            continue
         axes[0].plot([t / 60 for t in d["wall_time_s"]], d["val_success"], marker="o", ms=3, label=label)
         axes[1].plot([s / 1000 for s in d["env_steps"]], d["val_success"], marker="o", ms=3, label=label)
     axes[0].set_xlabel("wall time on 2 CPU cores (min)")
     axes[1].set_xlabel("environment steps (thousands)")
     for ax in axes:
         ax.set_ylabel("validation success")
-        ax.set_ylim(0, 1)
+        ax.set_ylim(args.ymin, 1)
         ax.grid(alpha=0.3)
     axes[0].legend(loc="lower right", fontsize=8)
     fig.tight_layout()
