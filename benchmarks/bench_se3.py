@@ -3,6 +3,7 @@ versus the numpy path through 4x4 matrices.
 
     python benchmarks/bench_se3.py            # N = 1, 16, 256 configurations per call
     python benchmarks/bench_se3.py --quick    # shorter timings
+    python benchmarks/bench_se3.py --birrt    # also S-shape Bi-RRT in Slot, both paths
 
 Planners call these with a few configurations at a time (Bi-RRT: one nearest-node query
 or one march per call), where numpy's per-call overhead dominates. The inputs are shaped
@@ -39,6 +40,7 @@ def calls_per_second(fn: Callable[[], object], budget: float) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="0.1 s per measurement instead of 0.5 s")
+    parser.add_argument("--birrt", action="store_true", help="also time Bi-RRT (3,000 nodes) on Slot test problems 1-3 with each path")
     args = parser.parse_args()
     if not HAVE_NUMBA:
         raise SystemExit("numba is not installed: there is no compiled path to compare")
@@ -62,6 +64,29 @@ def main() -> None:
             finally:
                 sshape.HAVE_NUMBA = True
             print(f"{op:<10}{n:>5}{compiled:>14,.0f}{plain:>12,.0f}{compiled / plain:>7.1f}x")
+    if args.birrt:
+        birrt_speed()
+
+
+def birrt_speed() -> None:
+    """Bi-RRT with the S-shape in Slot on each path: time, and whether the results match."""
+    from pointplan.planners.birrt import BiRRT
+    from pointplan.scenes.scenarios import make_scenario
+
+    scenario = make_scenario("slot", robot="sshape")
+    print(f"\n{'Slot test problem':<18}{'numpy s':>9}{'compiled s':>12}{'ratio':>8}{'nodes':>7}  same result")
+    for i in (1, 2, 3):
+        problem = scenario.problem("test", i)
+        runs = {}
+        for compiled in (False, True):
+            sshape.HAVE_NUMBA = compiled
+            t = time.perf_counter()
+            res = BiRRT(scenario.robot, max_nodes=3000, seed=1).plan(problem)
+            runs[compiled] = (time.perf_counter() - t, res)
+        sshape.HAVE_NUMBA = True
+        (t_np, a), (t_c, b) = runs[False], runs[True]
+        same = (a.success, a.nodes, a.collision_checks, len(a.path)) == (b.success, b.nodes, b.collision_checks, len(b.path)) and np.allclose(a.path, b.path, atol=1e-9)
+        print(f"{i:<18}{t_np:>9.2f}{t_c:>12.2f}{t_np / t_c:>7.2f}x{b.nodes:>7}  {same}")
 
 
 if __name__ == "__main__":
