@@ -75,6 +75,11 @@ class SAC:
     def _new_average(self) -> nn.Module:
         avg = copy.deepcopy(self.actor).requires_grad_(False).eval()
         avg.detach_encoder = False  # its encoder is its own copy
+        # (average, actor) tensor pairs, found once: state_dict tensors share storage with the
+        # modules, and loading a state copies into them in place
+        pairs = list(zip(avg.state_dict().values(), self.actor.state_dict().values()))
+        self._avg_float = [(a, p) for a, p in pairs if a.dtype.is_floating_point]
+        self._avg_other = [(a, p) for a, p in pairs if not a.dtype.is_floating_point]
         return avg
 
     @property
@@ -168,11 +173,10 @@ class SAC:
         if self.actor_avg is None:
             return
         rate = self.cfg.policy_avg
-        for pa, p in zip(self.actor_avg.state_dict().values(), self.actor.state_dict().values()):
-            if pa.dtype.is_floating_point:
-                pa.mul_(1 - rate).add_(p, alpha=rate)
-            else:
-                pa.copy_(p)
+        for pa, p in self._avg_float:
+            pa.mul_(1 - rate).add_(p, alpha=rate)
+        for pa, p in self._avg_other:
+            pa.copy_(p)
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict[str, Any]:

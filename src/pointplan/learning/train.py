@@ -217,11 +217,14 @@ def train(
         if steps >= next_eval or steps >= cfg.total_steps:
             next_eval += cfg.eval_every
             agent.actor.eval()
-            res = rollout_batch(lambda o, qq, g: agent.act(o, qq, g, deterministic=True, averaged=True), robot, env_cfg, val_problems, scenario.horizon, seed=cfg.seed)
+
+            def validate(averaged: bool) -> list[Any]:
+                return rollout_batch(lambda o, qq, g: agent.act(o, qq, g, deterministic=True, averaged=averaged), robot, env_cfg, val_problems, scenario.horizon, seed=cfg.seed)
+
+            res = validate(averaged=True)
             raw: dict[str, float] = {}
             if agent.actor_avg is not None:  # the current actor too, for comparison
-                res_raw = rollout_batch(lambda o, qq, g: agent.act(o, qq, g, deterministic=True), robot, env_cfg, val_problems, scenario.horizon, seed=cfg.seed)
-                raw["val_success_current"] = float(np.mean([r.success for r in res_raw]))
+                raw["val_success_current"] = float(np.mean([r.success for r in validate(averaged=False)]))
             agent.actor.train()
             val = float(np.mean([r.success for r in res]))
             nodes_all = float(np.mean([r.nodes for r in res]))
