@@ -251,7 +251,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         cfg = config_from_dict(load_checkpoint(args.resume)["train_config"])
         # settings given on the command line override the run's own; the networks cannot change
         over: dict[str, object] = {"total_steps": args.steps or cfg.total_steps}
-        for name in ("updates_per_step", "eval_every", "eval_episodes", "target_success", "device"):
+        for name in ("updates_per_step", "eval_every", "eval_episodes", "target_success", "device", "retry_failures", "mine_episodes"):
             if getattr(args, name) is not None:
                 over[name] = getattr(args, name)
         sac_over = {k: getattr(args, k) for k in ("lr", "batch_size", "policy_avg") if getattr(args, k) is not None}
@@ -274,6 +274,8 @@ def cmd_train(args: argparse.Namespace) -> int:
             net=_net_config(args),
             sac=SACConfig(batch_size=args.batch_size or 256, lr=args.lr or 3e-4, init_alpha=args.init_alpha, actor_delay=args.actor_delay, policy_avg=args.policy_avg or 0.0),
             init_actor=args.init_actor,
+            retry_failures=args.retry_failures or 0.0,
+            mine_episodes=args.mine_episodes or 0,
         )
     res = train(cfg, args.run_dir, progress=not args.quiet, resume=args.resume)
     print(f"best validation success {res.best_success:.3f} after {res.steps} env steps, {res.wall_time_s:.0f} s; checkpoints in {res.run_dir}")
@@ -366,6 +368,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--init-alpha", type=float, default=1.0, help="initial entropy temperature (default: %(default)s)")
     p.add_argument("--actor-delay", type=int, default=0, help="critic-only updates before the actor moves (default: %(default)s)")
     p.add_argument("--policy-avg", type=float, help="rate of a running average of the actor's weights, evaluated and saved as the policy (default: 0, off; e.g. 3e-5)")
+    p.add_argument("--retry-failures", type=float, help="share of new episodes that retry a problem the policy failed (default: 0, off; e.g. 0.25)")
+    p.add_argument("--mine-episodes", type=int, help="fresh training problems the deterministic policy attempts at each validation; its failures are retried (default: 0)")
     p.add_argument("--resume", help="continue a run from its last.pt")
     p.set_defaults(func=cmd_train)
 

@@ -22,8 +22,10 @@ import torch
 from ..envs.core import BatchedCore, EnvConfig
 from ..models.actor_critic import NetConfig
 from ..models.encoders import EncoderConfig
+from ..scenes.scene import Problem
 from ..scenes.scenarios import make_scenario
 from .checkpoint import load_checkpoint, save_checkpoint, to_dict
+from .curriculum import EpisodeSource, FailurePool
 from .replay import EpisodeReplay
 from .sac import SAC, SACConfig
 
@@ -53,6 +55,15 @@ class TrainConfig:
     sac: SACConfig = field(default_factory=SACConfig)
     #: a checkpoint whose actor initialises this run's actor (e.g. behavioural cloning)
     init_actor: str | None = None
+    #: share of new training episodes that retry a problem the policy failed (see
+    #: ``learning/curriculum.py``); 0 draws every episode fresh, as in the paper
+    retry_failures: float = 0.0
+    #: at every validation, the deterministic policy also attempts this many fresh training
+    #: problems; the ones it fails enter the retry pool
+    mine_episodes: int = 0
+    #: problems kept for retrying, and retries per problem after its last failure
+    pool_size: int = 2000
+    pool_retries: int = 4
 
 
 def config_from_dict(d: dict[str, Any]) -> TrainConfig:
@@ -169,7 +180,9 @@ def train(
         "action_norm": np.zeros((e, h)),
         "collided": np.zeros((e, h), bool),
     }
-    core.reset_envs(range(e), rng)
+    pool = FailurePool(cfg.pool_size, cfg.pool_retries) if (cfg.retry_failures > 0 or cfg.mine_episodes > 0) else None
+    source = EpisodeSource(core, pool, cfg.retry_failures)
+    source.reset(range(e), rng)
     obs = core.observe(rng)["observation"]
     recent: list[float] = []
     credit, last_losses = 0.0, {}
@@ -199,9 +212,11 @@ def train(
             for i in np.flatnonzero(done):
                 n = int(t_idx[i]) + 1
                 buffer.add_episode(*(st[k][i, :n] for k in ("obs", "next_obs", "q", "q_next", "goal", "action", "action_norm", "collided")))
-                recent.append(float(term[i]))
+                if not source.is_retry(i):  # the success rate of fresh problems only
+                    recent.append(float(term[i]))
+                source.ended(i, bool(term[i]))
             recent = recent[-200:]
-            core.reset_envs(np.flatnonzero(done).tolist(), rng)
+            source.reset(np.flatnonzero(done).tolist(), rng)
             fresh = core.observe(rng)["observation"]
             next_obs = np.where(done.reshape((-1,) + (1,) * len(obs_shape)), fresh, next_obs)
         obs = next_obs
@@ -225,6 +240,20 @@ def train(
             raw: dict[str, float] = {}
             if agent.actor_avg is not None:  # the current actor too, for comparison
                 raw["val_success_current"] = float(np.mean([r.success for r in validate(averaged=False)]))
+            if pool is not None:
+                if cfg.mine_episodes > 0:  # failures of the deterministic policy on fresh problems
+                    mined = []
+                    for _ in range(cfg.mine_episodes):
+                        scene = scenario.scene("train", int(rng.integers(0, 2**31 - 1)))
+                        mined.append(Problem(scene, *scenario.sample_problem(scene, rng)))
+                    mres = rollout_batch(lambda o, qq, g: agent.act(o, qq, g, deterministic=True, averaged=True), robot, env_cfg, mined, scenario.horizon, seed=steps)
+                    for p, r in zip(mined, mres, strict=True):
+                        if not r.success:
+                            pool.failed(p)
+                    raw["mine_success"] = float(np.mean([r.success for r in mres]))
+                source.prune()
+                raw["pool_size"] = float(len(pool))
+                raw["retry_share"] = source.retry_share
             agent.actor.train()
             val = float(np.mean([r.success for r in res]))
             nodes_all = float(np.mean([r.nodes for r in res]))
