@@ -22,8 +22,8 @@ import torch
 from ..envs.core import BatchedCore, EnvConfig
 from ..models.actor_critic import NetConfig
 from ..models.encoders import EncoderConfig
-from ..scenes.scene import Problem
 from ..scenes.scenarios import make_scenario
+from ..scenes.scene import Problem
 from .checkpoint import load_checkpoint, save_checkpoint, to_dict
 from .curriculum import EpisodeSource, FailurePool
 from .replay import EpisodeReplay
