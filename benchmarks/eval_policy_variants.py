@@ -4,9 +4,11 @@ the rule at the workspace bounds, observation seeds.
     python benchmarks/eval_policy_variants.py                       # the shipped policy
     python benchmarks/eval_policy_variants.py --bounds clip stop    # both bounds rules
     python benchmarks/eval_policy_variants.py --checkpoints a.pt b.pt c.pt --average
+    python benchmarks/eval_policy_variants.py --splits val --val-episodes 2000 --problem-seeds 0 1 2 3
 
-Prints one row per (policy, bounds rule, split, observation seed): success (paths re-checked
-by the evaluator), mean nodes, failing problem indices. ``--average`` adds the uniform
+Prints one row per (policy, bounds rule, split, problem seed, observation seed): success
+(paths re-checked by the evaluator), mean nodes, failing problem indices; with several rows
+per policy, a last row sums each policy's failures over them. ``--average`` adds the uniform
 average of the checkpoints' actor weights (they must share one network layout).
 """
 
@@ -49,6 +51,7 @@ def main() -> int:
     ap.add_argument("--val-episodes", type=int, default=1000)
     ap.add_argument("--test-episodes", type=int, default=400)
     ap.add_argument("--obs-seeds", type=int, nargs="+", default=[0], help="seeds of the observed point subsets")
+    ap.add_argument("--problem-seeds", type=int, nargs="+", default=[0], help="seeds of the start/goal draws (0: the problem sets of pointplan eval)")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
@@ -63,21 +66,25 @@ def main() -> int:
     first = next(iter(policies.values()))
     scenario = make_scenario(first.env)
     episodes = {"val": args.val_episodes, "test": args.test_episodes, "train": args.val_episodes}
-    problems = {s: scenario.problems(s, episodes[s], seed=0) for s in args.splits}
+    problems = {(s, ps): scenario.problems(s, episodes[s], seed=ps) for s in args.splits for ps in args.problem_seeds}
     horizon = int(first.meta.get("horizon") or scenario.horizon)
 
-    print(f"{'policy':<28} {'bounds':<6} {'split':<5} {'seed':>4} {'success':>8} {'nodes':>6}  failing")
+    print(f"{'policy':<28} {'bounds':<6} {'split':<5} {'prob':>4} {'obs':>4} {'success':>8} {'nodes':>6}  failing")
     for name, pol in policies.items():
+        failed = total = rows = 0
         for rule in args.bounds:
             env = EnvConfig(observation=pol.observation, n_points=pol.n_points, bounds=rule)
-            for split, probs in problems.items():
+            for (split, pseed), probs in problems.items():
                 for seed in args.obs_seeds:
                     res = rollout_batch(pol, pol.robot, env, probs, horizon, seed=seed)
                     ok = np.array([r.success and check_path(pol.robot, p, r.path) for r, p in zip(res, probs)])
                     nodes = float(np.mean([r.nodes for r in res]))
                     fails = np.flatnonzero(~ok).tolist()
+                    failed, total, rows = failed + len(fails), total + len(ok), rows + 1
                     shown = " ".join(map(str, fails[:12])) + (" ..." if len(fails) > 12 else "")
-                    print(f"{name:<28} {rule:<6} {split:<5} {seed:>4} {ok.mean():>8.2%} {nodes:>6.2f}  {shown}", flush=True)
+                    print(f"{name:<28} {rule:<6} {split:<5} {pseed:>4} {seed:>4} {ok.mean():>8.2%} {nodes:>6.2f}  {shown}", flush=True)
+        if rows > 1:
+            print(f"{name:<28} {'all':<6} {'all':<5} {'':>4} {'':>4} {1 - failed / total:>8.2%} {'':>6}  {failed} failures of {total}", flush=True)
     return 0
 
 
