@@ -77,14 +77,20 @@ def test_episode_source_restarts_failed_problems_exactly() -> None:
 def test_episode_source_without_retries_leaves_the_rng_alone() -> None:
     """With the option off, episodes are drawn exactly as before it existed."""
     scenario = make_scenario("narrow2d")
-    a = BatchedCore(scenario, 3, EnvConfig(split="train"))
     b = BatchedCore(scenario, 3, EnvConfig(split="train"))
-    EpisodeSource(a, None).reset(range(3), np.random.default_rng(5))
-    b.reset_envs(range(3), np.random.default_rng(5))
-    np.testing.assert_array_equal(a.q, b.q)
-    np.testing.assert_array_equal(a.goal, b.goal)
+    rb = np.random.default_rng(5)
+    b.reset_envs(range(3), rb)
+    pool = FailurePool()
+    pool.failed(_problems(1)[0])  # a pool that is only filled (mining), never drawn from
+    for p in (None, pool):
+        a = BatchedCore(scenario, 3, EnvConfig(split="train"))
+        ra = np.random.default_rng(5)
+        EpisodeSource(a, p, retry=0.0).reset(range(3), ra)
+        np.testing.assert_array_equal(a.q, b.q)
+        np.testing.assert_array_equal(a.goal, b.goal)
+        assert ra.bit_generator.state == rb.bit_generator.state
     with pytest.raises(ValueError, match="pool"):
-        EpisodeSource(a, None, retry=0.5)
+        EpisodeSource(b, None, retry=0.5)
 
 
 def test_training_with_retries_logs_the_pool(tmp_path: Path) -> None:

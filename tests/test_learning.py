@@ -232,3 +232,20 @@ def test_shipped_policy_loads_and_solves_fixed_problems() -> None:
     assert all(r.success == ok for r, ok in zip(results, solved))
     with pytest.raises(ValueError, match="no policy ships"):
         make_planner("policy", make_scenario("boxes3d").robot)
+
+
+def test_metrics_csv_keeps_columns_aligned_when_new_ones_appear(tmp_path: Path) -> None:
+    """A run resumed into its own folder with an option that logs more columns."""
+    import csv
+
+    from pointplan.learning.train import _Logger
+
+    _Logger(tmp_path).log({"env_steps": 1.0, "val_success": 0.5, "critic_loss": 3.0})
+    log = _Logger(tmp_path)
+    log.log({"env_steps": 2.0, "val_success": 0.6, "pool_size": 7.0, "critic_loss": 2.0})
+    log.log({"env_steps": 3.0, "critic_loss": 1.0, "val_success": 0.7, "pool_size": 5.0})
+    with (tmp_path / "metrics.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [r["critic_loss"] for r in rows] == ["3.0", "2.0", "1.0"]
+    assert [r["val_success"] for r in rows] == ["0.5", "0.6", "0.7"]
+    assert [r["pool_size"] for r in rows] == ["", "7.0", "5.0"]

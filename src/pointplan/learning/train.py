@@ -98,12 +98,23 @@ class _Logger:
 
     def log(self, row: dict[str, float]) -> None:
         self.rows.append(row)
+        old: list[dict[str, str]] = []
         keys = list(row)
-        new = not self.path.exists()
-        with self.path.open("a", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
-            if new:
+        if self.path.exists():  # e.g. a run resumed into its own folder: keep its columns
+            with self.path.open(newline="") as f:
+                reader = csv.DictReader(f)
+                header = list(reader.fieldnames or [])
+                if set(keys) <= set(header):
+                    keys = header
+                else:  # new columns (an option turned on at resume): rewrite with all of them
+                    old = list(reader)
+                    keys = header + [k for k in keys if k not in header]
+        rewrite = bool(old) or not self.path.exists()
+        with self.path.open("w" if rewrite else "a", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore", restval="")
+            if rewrite:
                 w.writeheader()
+                w.writerows(old)
             w.writerow(row)
         if self.tb is not None:
             for k, v in row.items():
