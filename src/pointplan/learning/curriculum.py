@@ -9,8 +9,8 @@ collected experience comes from them.
 A problem enters the pool when an episode on it fails (training episodes, or deterministic
 rollouts of the policy on fresh training problems). Each is lent out at most ``retries``
 times after its last failure: failing again resets the count, so problems the policy keeps
-failing stay until it learns them, and solved ones leave. The pool is bounded; the oldest
-entries go first.
+failing stay until it learns them, and solved ones run out of retries. The pool is bounded;
+the oldest entries go first.
 """
 
 from __future__ import annotations
@@ -35,50 +35,40 @@ class FailurePool:
             raise ValueError("capacity and retries must be positive")
         self.capacity = int(capacity)
         self.retries = int(retries)
-        self._left: OrderedDict[int, int] = OrderedDict()  # key -> draws left
-        self._problems: dict[int, Problem] = {}
+        self._entries: OrderedDict[int, tuple[Problem, int]] = OrderedDict()  # key -> (problem, draws left)
         self._next_key = 0
-        self.added = 0  # problems that entered (or re-entered) the pool
 
     def __len__(self) -> int:
-        return len(self._left)
+        return len(self._entries)
 
     def keys(self) -> list[int]:
         """Keys of the problems that can be drawn, oldest first."""
-        return list(self._left)
+        return list(self._entries)
 
     def failed(self, problem: Problem, key: int | None = None) -> int:
         """Record a failure on ``problem`` (``key`` if it was drawn from the pool); returns
         its key. It may now be drawn ``retries`` more times."""
-        if key is None or key not in self._problems:
+        if key is None:
             key = self._next_key
             self._next_key += 1
-            self._problems[key] = problem
-        self._left[key] = self.retries
-        self._left.move_to_end(key)
-        self.added += 1
-        while len(self._left) > self.capacity:
-            old, _ = self._left.popitem(last=False)
-            self._problems.pop(old, None)
+        self._entries[key] = (problem, self.retries)
+        self._entries.move_to_end(key)
+        while len(self._entries) > self.capacity:
+            self._entries.popitem(last=False)
         return key
 
     def draw(self, rng: np.random.Generator) -> tuple[int, Problem] | None:
         """A problem of the pool (uniformly) and its key, or None if the pool is empty."""
-        if not self._left:
+        if not self._entries:
             return None
-        keys = list(self._left)
+        keys = list(self._entries)
         key = keys[int(rng.integers(len(keys)))]
-        problem = self._problems[key]
-        self._left[key] -= 1
-        if self._left[key] <= 0:
-            del self._left[key]  # kept in _problems until failed() or pruning: a late failure re-enters it
+        problem, left = self._entries[key]
+        if left <= 1:
+            del self._entries[key]  # a later failure brings it back under the same key
+        else:
+            self._entries[key] = (problem, left - 1)
         return key, problem
-
-    def prune(self, live: Sequence[int]) -> None:
-        """Forget problems neither in the pool nor in ``live`` (keys still being attempted)."""
-        keep = set(self._left) | set(live)
-        for k in [k for k in self._problems if k not in keep]:
-            del self._problems[k]
 
 
 class EpisodeSource:
@@ -124,10 +114,6 @@ class EpisodeSource:
             problem = self.problem[i]
             assert problem is not None
             self.pool.failed(problem, int(self.key[i]) if self.key[i] >= 0 else None)
-
-    def prune(self) -> None:
-        if self.pool is not None:
-            self.pool.prune(self.key[self.key >= 0].tolist())
 
     @property
     def retry_share(self) -> float:

@@ -262,7 +262,6 @@ def train(
                         if not r.success:
                             pool.failed(p)
                     raw["mine_success"] = float(np.mean([r.success for r in mres]))
-                source.prune()
                 raw["pool_size"] = float(len(pool))
                 raw["retry_share"] = source.retry_share
             agent.actor.train()
