@@ -219,7 +219,7 @@ def test_shipped_policy_loads_and_solves_fixed_problems() -> None:
     from pointplan.planners import make_planner
     from pointplan.scenes.scenarios import make_scenario
 
-    path = shipped_checkpoint("narrow2d")
+    path = shipped_checkpoint("disc2d")
     assert path.stat().st_size < 2_000_000
     policy = Policy.from_checkpoint(path)
     assert policy.observation == "surface-normals" and policy.robot.name == "disc2d"

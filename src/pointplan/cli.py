@@ -44,7 +44,7 @@ def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
     if name == "birrt":
         kwargs = {"max_nodes": args.max_nodes, "seed": seed}
     elif name == "policy":
-        kwargs = {"checkpoint": getattr(args, "checkpoint", None)}
+        kwargs = {"checkpoint": getattr(args, "checkpoint", None), "observation": getattr(args, "observation", None)}
     try:
         return make_planner(name, robot, **kwargs)
     except ValueError as e:
@@ -63,7 +63,8 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument("--scene", help="plan on a scene file (JSON, see docs/scenes.md) instead of --env")
     p.add_argument("--robot", help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot), or the robot of a scene file that names none")
     p.add_argument("--planner", default=planner_default, help="birrt, straight or policy (default: %(default)s)")
-    p.add_argument("--checkpoint", help="trained policy for --planner policy")
+    p.add_argument("--checkpoint", help="trained policy for --planner policy (default: the policy that ships for the robot and --observation)")
+    p.add_argument("--observation", help="what the robot observes (the policy's input; drawn by render and view): 2D surface, surface-normals, interior or image; 3D global or local (policy default: the one that ships for the robot)")
     p.add_argument("--max-nodes", type=int, default=20000, help="Bi-RRT node budget (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="problem-set seed (default: %(default)s)")
 
@@ -261,8 +262,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     else:
         cfg = TrainConfig(
             env=args.env,
-            observation=args.observation,
-            n_points=args.n_points,
+            robot=args.robot,
+            observation=_default_observation(args),
+            n_points=_default_points(args),
             num_envs=args.num_envs,
             total_steps=args.steps or 200_000,
             updates_per_step=0.25 if args.updates_per_step is None else args.updates_per_step,
@@ -287,23 +289,37 @@ def cmd_bc(args: argparse.Namespace) -> int:
 
     cfg = BCConfig(
         env=args.env,
-        observation=args.observation,
-        n_points=args.n_points,
+        robot=args.robot,
+        observation=_default_observation(args),
+        n_points=_default_points(args),
         n_problems=args.problems,
         epochs=args.epochs,
         seed=args.seed,
         device=args.device,
         net=_net_config(args),
+        workers=args.workers,
+        demos_file=args.demos,
     )
     summary = train_bc(cfg, args.run_dir, progress=not args.quiet)
     print(json.dumps(summary, indent=2))
     return 0
 
 
+def _default_observation(args: argparse.Namespace) -> str:
+    from .scenes.scenarios import is_3d
+
+    return str(args.observation or ("global" if is_3d(args.env) else "surface-normals"))
+
+
+def _default_points(args: argparse.Namespace) -> int:
+    return int(args.n_points or (256 if _default_observation(args) == "global" else 64))
+
+
 def _add_net(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--env", default="narrow2d")
-    p.add_argument("--observation", default="surface-normals", help="surface, surface-normals, interior or image")
-    p.add_argument("--n-points", type=int, default=64)
+    p.add_argument("--env", default="narrow2d", help="scenario to train on (default: %(default)s)")
+    p.add_argument("--robot", help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot)")
+    p.add_argument("--observation", help="2D: surface, surface-normals (default), interior or image; 3D: global (default) or local")
+    p.add_argument("--n-points", type=int, help="observed points (default: 256 for global, else 64)")
     p.add_argument("--encoder", default="pointnet", help="pointnet, mlp or cnn (use cnn with --observation image)")
     p.add_argument("--width", type=int, default=64, help="layer width (default: %(default)s)")
     p.add_argument("--layers", type=int, default=3)
@@ -332,7 +348,6 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("render", help="draw a problem, its observation and a planner's path")
     _add_common(p)
-    p.add_argument("--observation", help="2D: surface, surface-normals (default), interior or image; 3D: global (default) or local")
     p.add_argument("--n-points", type=int, help="observed points (default: 64; 256 for global)")
     p.add_argument("-o", "--output", default="render.png", help="PNG file (default: %(default)s)")
     p.add_argument("--gif", help="3D: also write an animation of the path, one frame per time step")
@@ -340,7 +355,6 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("view", help="interactive 3D viewer in the browser (pip install 'pointplan[viewer]')")
     _add_common(p)
-    p.add_argument("--observation", choices=["global", "local"], help="also show what the robot observes at each step")
     p.add_argument("--n-points", type=int, help="observed points")
     p.add_argument("--port", type=int, default=8080, help="(default: %(default)s)")
     p.add_argument("--host", default="127.0.0.1", help="0.0.0.0 to serve other machines (default: %(default)s)")
@@ -377,6 +391,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_net(p)
     p.add_argument("--problems", type=int, default=2000, help="demonstration problems (default: %(default)s)")
     p.add_argument("--epochs", type=int, default=30)
+    p.add_argument("--workers", type=int, default=1, help="processes planning the demonstrations (default: %(default)s)")
+    p.add_argument("--demos", help="demonstrations file (.npz): reused if it exists, written after planning otherwise")
     p.set_defaults(func=cmd_bc)
 
     p = sub.add_parser("demo", help="plan 2D-Narrow test problems and draw a few")

@@ -36,6 +36,8 @@ class Demos:
     action: np.ndarray
     scene: np.ndarray
     problems: list[Problem]
+    #: problem index -> resampled path (what :func:`save_demos` keeps)
+    paths: dict[int, np.ndarray] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.q)
@@ -53,32 +55,107 @@ def resample_path(robot: Robot, path: np.ndarray) -> np.ndarray:
     return np.asarray(out)
 
 
-def generate_demos(scenario: Scenario, n_problems: int, seed: int = 0, max_nodes: int = 20000, progress: bool = True, split: str = "train") -> Demos:
-    """Plan ``n_problems`` training problems with Bi-RRT and cut the paths into steps."""
+def _demo_index(seed: int, n_problems: int, i: int) -> int:
+    # training workspaces far from those the RL trainer draws first; seed-dependent
+    return 1_000_000 + seed * n_problems + i
+
+
+def _plan_demo(job: tuple[str, str | None, str, int, int, int]) -> tuple[int, np.ndarray | None]:
+    """Solve one training problem with Bi-RRT and cut its path into policy steps (in a worker
+    process: the problem is rebuilt from its index, so only indices and arrays travel)."""
     from ..planners.birrt import BiRRT
 
+    env, robot_name, split, index, seed, max_nodes = job
+    scenario = make_scenario(env, robot=robot_name)
+    p = scenario.problem(split, index, seed=seed)
+    res = BiRRT(scenario.robot, max_nodes=max_nodes, seed=seed * 7_919 + index).plan(p)
+    return index, (resample_path(scenario.robot, res.path) if res.success else None)
+
+
+def generate_demos(
+    scenario: Scenario,
+    n_problems: int,
+    seed: int = 0,
+    max_nodes: int = 20000,
+    progress: bool = True,
+    split: str = "train",
+    workers: int = 1,
+) -> Demos:
+    """Plan ``n_problems`` training problems with Bi-RRT and cut the paths into steps.
+
+    ``workers > 1`` plans in that many processes (each problem has its own planner seed,
+    so the demonstrations do not depend on the number of workers)."""
     robot = scenario.robot
-    planner = BiRRT(robot, max_nodes=max_nodes, seed=seed)
-    qs, goals, acts, idx, probs = [], [], [], [], []
-    it = range(n_problems)
+    robot_name = robot.name if robot.dim == 3 else None
+    jobs = [(scenario.name, robot_name, split, _demo_index(seed, n_problems, i), seed, max_nodes) for i in range(n_problems)]
+    bar = None
     if progress:
         from tqdm import tqdm
 
-        it = tqdm(it, desc="demonstrations", unit="problem")
-    for i in it:
-        # training workspaces far from those the RL trainer draws first; seed-dependent
-        p = scenario.problem(split, 1_000_000 + seed * n_problems + i, seed=seed)
-        res = planner.plan(p)
-        if not res.success:
+        bar = tqdm(total=n_problems, desc="demonstrations", unit="problem")
+    paths: dict[int, np.ndarray | None] = {}
+    if workers > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=_single_thread) as ex:
+            for index, path in ex.map(_plan_demo, jobs, chunksize=8):
+                paths[index] = path
+                if bar is not None:
+                    bar.update()
+    else:
+        for job in jobs:
+            index, path = _plan_demo(job)
+            paths[index] = path
+            if bar is not None:
+                bar.update()
+    if bar is not None:
+        bar.close()
+    return _demos_from_paths(scenario, split, seed, paths)
+
+
+def _single_thread() -> None:
+    torch.set_num_threads(1)
+
+
+def _demos_from_paths(scenario: Scenario, split: str, seed: int, paths: dict[int, np.ndarray | None]) -> Demos:
+    robot = scenario.robot
+    qs, goals, acts, idx, probs, keys = [], [], [], [], [], []
+    for index in sorted(paths):
+        path = paths[index]
+        if path is None:
             continue
-        path = resample_path(robot, res.path)
+        p = scenario.problem(split, index, seed=seed)
         a = robot.log(path[:-1], path[1:]) / robot.action_scale
         qs.append(path[:-1])
         goals.append(np.broadcast_to(p.goal, path[:-1].shape))
         acts.append(np.clip(a, -1, 1))
         idx.append(np.full(len(a), len(probs)))
         probs.append(p)
-    return Demos(np.concatenate(qs), np.concatenate(goals), np.concatenate(acts).astype(np.float32), np.concatenate(idx), probs)
+        keys.append(index)
+    kept = {k: p for k in keys if (p := paths[k]) is not None}
+    return Demos(np.concatenate(qs), np.concatenate(goals), np.concatenate(acts).astype(np.float32), np.concatenate(idx), probs, kept)
+
+
+def save_demos(path: str | Path, scenario: Scenario, demos: Demos, split: str, seed: int) -> None:
+    """Keep the resampled demonstration paths (plain arrays) to reuse them in another run."""
+    paths = demos.paths
+    keys = np.array(sorted(paths), np.int64)
+    flat = np.concatenate([paths[int(k)] for k in keys]) if len(keys) else np.zeros((0, scenario.robot.config_dim))
+    lengths = np.array([len(paths[int(k)]) for k in keys], np.int64)
+    np.savez_compressed(path, env=scenario.name, robot=scenario.robot.name, split=split, seed=seed, index=keys, lengths=lengths, configs=flat)
+
+
+def load_demos(path: str | Path, scenario: Scenario) -> Demos:
+    """Demonstrations saved by :func:`save_demos` (the problems are rebuilt from their indices)."""
+    with np.load(path, allow_pickle=False) as f:
+        if str(f["env"]) != scenario.name or str(f["robot"]) != scenario.robot.name:
+            raise ValueError(f"{path}: demonstrations of {f['env']} / {f['robot']}, not {scenario.name} / {scenario.robot.name}")
+        split, seed = str(f["split"]), int(f["seed"])
+        ends = np.cumsum(f["lengths"])
+        pieces = np.split(f["configs"], ends[:-1]) if len(ends) else []
+        paths: dict[int, np.ndarray | None] = {int(k): np.asarray(c) for k, c in zip(f["index"], pieces)}
+    return _demos_from_paths(scenario, split, seed, paths)
 
 
 def observe_demos(demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Generator, chunk: int = 4096) -> np.ndarray:
@@ -97,6 +174,8 @@ def observe_demos(demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Gen
 @dataclass(frozen=True)
 class BCConfig:
     env: str = "narrow2d"
+    #: ``sphere3d`` or ``sshape`` in the 3D scenes; ``None`` takes the scenario's default
+    robot: str | None = None
     observation: str = "surface-normals"
     n_points: int = 64
     n_problems: int = 2000
@@ -108,20 +187,28 @@ class BCConfig:
     #: draw new observation subsets every this many epochs (0: never)
     refresh_every: int = 5
     net: NetConfig = field(default_factory=lambda: NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True))
+    #: processes planning the demonstrations
+    workers: int = 1
+    #: a file of demonstrations: loaded if it exists, written after planning otherwise
+    demos_file: str | None = None
 
 
 def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: Demos | None = None) -> dict[str, Any]:
     """Fit the actor to demonstrations; saves ``run_dir/bc.pt``. Returns a summary."""
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
-    scenario = make_scenario(cfg.env)
+    scenario = make_scenario(cfg.env, robot=cfg.robot)
     robot = scenario.robot
     env = EnvConfig(observation=cfg.observation, n_points=cfg.n_points)
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     t0 = time.perf_counter()
+    if demos is None and cfg.demos_file and Path(cfg.demos_file).exists():
+        demos = load_demos(cfg.demos_file, scenario)
     if demos is None:
-        demos = generate_demos(scenario, cfg.n_problems, cfg.seed, progress=progress)
+        demos = generate_demos(scenario, cfg.n_problems, cfg.seed, progress=progress, workers=cfg.workers)
+        if cfg.demos_file:
+            save_demos(cfg.demos_file, scenario, demos, "train", cfg.seed)
     t_demos = time.perf_counter() - t0
     obs = obs_input(robot, observe_demos(demos, robot, env, rng))
     obs_shape = tuple(obs.shape[1:])

@@ -35,6 +35,8 @@ class TrainConfig:
     """Everything that defines a training run (saved with every checkpoint)."""
 
     env: str = "narrow2d"
+    #: ``sphere3d`` or ``sshape`` in the 3D scenes; ``None`` takes the scenario's default
+    robot: str | None = None
     observation: str = "surface-normals"
     n_points: int = 64
     #: environments stepping together
@@ -149,7 +151,7 @@ def train(
 
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
-    scenario = make_scenario(cfg.env)
+    scenario = make_scenario(cfg.env, robot=cfg.robot)
     robot = scenario.robot
     env_cfg = EnvConfig(observation=cfg.observation, n_points=cfg.n_points, split="train")
     core = BatchedCore(scenario, cfg.num_envs, env_cfg)

@@ -69,20 +69,32 @@ class Policy:
         return self.actor.act(o, g).cpu().numpy()
 
 
-#: trained policies that ship inside the package: env name -> file in ``pointplan/data``
-SHIPPED = {"narrow2d": "narrow2d_policy.pt"}
+#: trained policies that ship inside the package: (robot, observation) -> file in
+#: ``pointplan/data``. The 3D ones were trained on 3D-Boxes and serve every 3D scene, as
+#: in the paper.
+SHIPPED: dict[tuple[str, str], str] = {
+    ("disc2d", "surface-normals"): "narrow2d_policy.pt",
+}
+#: the observation a robot's policy uses when none is asked for
+DEFAULT_OBSERVATION = {"disc2d": "surface-normals", "sphere3d": "global", "sshape": "local"}
 
 
-def shipped_checkpoint(env: str = "narrow2d") -> Path:
-    """The path of the policy shipped for ``env`` (2D-Narrow: PointNet on 64 boundary points
-    with normals, BC then SAC + HER; see docs/results.md)."""
+def shipped_policies() -> list[tuple[str, str]]:
+    """The (robot, observation) pairs a policy ships for."""
     from importlib.resources import files
 
-    try:
-        name = SHIPPED[env]
-    except KeyError:
-        raise ValueError(f"no policy ships for {env!r}; shipped: {', '.join(SHIPPED)}; train one with `pointplan train`") from None
-    path = Path(str(files("pointplan") / "data" / name))
-    if not path.is_file():
-        raise FileNotFoundError(f"the shipped policy {path} is missing from this installation")
+    return [k for k, name in SHIPPED.items() if (files("pointplan") / "data" / name).is_file()]
+
+
+def shipped_checkpoint(robot: str = "disc2d", observation: str | None = None) -> Path:
+    """The path of the policy shipped for ``robot`` and ``observation`` (see
+    docs/results.md for how each was trained and what it scores)."""
+    from importlib.resources import files
+
+    observation = observation or DEFAULT_OBSERVATION.get(robot, "")
+    name = SHIPPED.get((robot, observation))
+    path = Path(str(files("pointplan") / "data" / name)) if name else None
+    if path is None or not path.is_file():
+        have = ", ".join(f"{r} with {o!r} points" for r, o in shipped_policies()) or "none"
+        raise ValueError(f"no policy ships for robot {robot!r} with {observation!r} observations (shipped: {have}); pass --checkpoint PATH, or train one with `pointplan train`")
     return path

@@ -14,16 +14,19 @@ from .straight import StraightLine
 PLANNERS: dict[str, Callable[..., Planner]] = {"birrt": BiRRT, "straight": StraightLine}
 
 
-def _policy_factory(robot: Robot, checkpoint: str | None = None, **kw: Any) -> Planner:
+def _policy_factory(robot: Robot, checkpoint: str | None = None, observation: str | None = None, **kw: Any) -> Planner:
+    """The policy planner: ``checkpoint`` (a path), or the policy that ships for ``robot``
+    and ``observation``."""
     from .policy import PolicyPlanner
 
     if not checkpoint or checkpoint == "shipped":
         from ..models.policy import shipped_checkpoint
 
-        if robot.name != "disc2d":
-            raise ValueError(f"no policy ships for robot {robot.name!r}: pass --checkpoint PATH (train one with `pointplan train`)")
-        checkpoint = str(shipped_checkpoint("narrow2d"))
-    return PolicyPlanner(checkpoint, robot=robot, **kw)
+        checkpoint = str(shipped_checkpoint(robot.name, observation))
+    planner = PolicyPlanner(checkpoint, robot=robot, **kw)
+    if observation is not None and planner.policy.observation != observation:
+        raise ValueError(f"the policy {checkpoint} was trained on {planner.policy.observation!r} observations, not {observation!r}")
+    return planner
 
 
 PLANNERS["policy"] = _policy_factory

@@ -111,15 +111,26 @@ def scenario_names() -> list[str]:
     return list(SCENARIOS) + list(SCENARIOS_3D)
 
 
+def scenario_key(name: str) -> str:
+    """The registry key of a scenario name or Gymnasium id (``pointplan/Boxes3D-v0`` ->
+    ``boxes3d``)."""
+    return name.lower().split("/")[-1].removesuffix("-v0").replace("-", "").replace("_", "")
+
+
+def is_3d(name: str) -> bool:
+    """Whether ``name`` is one of the 3D scenarios."""
+    from .scenes3d import SCENARIOS_3D
+
+    return scenario_key(name) in SCENARIOS_3D
+
+
 def make_scenario(name: str, robot: str | Robot | None = None, **kwargs: object) -> Scenario:
     """A scenario by name: ``narrow2d``, ``empty2d`` (2D disc); ``boxes3d``, ``synthetic3d``,
     ``ycb3d``, ``dynamic3d``, ``slot``, ``qureshi3d`` (``robot``: ``sphere3d`` or ``sshape``).
     Also accepts Gymnasium ids such as ``pointplan/Boxes3D-v0``."""
     from .scenes3d import SCENARIOS_3D
 
-    key = name.lower().split("/")[-1]
-    key = key.removesuffix("-v0")
-    key = key.replace("-", "").replace("_", "")
+    key = scenario_key(name)
     if key in SCENARIOS_3D:
         return SCENARIOS_3D[key](robot=robot, **kwargs)
     if key in SCENARIOS:
