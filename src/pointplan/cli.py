@@ -315,6 +315,22 @@ def _default_points(args: argparse.Namespace) -> int:
     return int(args.n_points or (256 if _default_observation(args) == "global" else 64))
 
 
+def cmd_convert_checkpoint(args: argparse.Namespace) -> int:
+    from .learning.checkpoint import VERSION
+    from .learning.convert import convert_checkpoint
+
+    print(
+        f"pointplan: warning: convert-checkpoint fully unpickles {args.old}, which runs any code stored in it; "
+        "convert only files from a source you trust",
+        file=sys.stderr,
+    )
+    notes = convert_checkpoint(args.old, args.new, trust_source=True)
+    for note in notes:
+        print(f"  converted {note}")
+    print(f"wrote {args.new} (checkpoint version {VERSION}: data only)")
+    return 0
+
+
 def _add_net(p: argparse.ArgumentParser) -> None:
     p.add_argument("--env", default="narrow2d", help="scenario to train on (default: %(default)s)")
     p.add_argument("--robot", help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot)")
@@ -402,6 +418,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", default="demo.png", help="figure (default: %(default)s)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser(
+        "convert-checkpoint",
+        help="rewrite an older checkpoint holding pickled objects as a data-only one (unpickles OLD: trusted files only)",
+    )
+    p.add_argument("old", help="the checkpoint to convert; it is fully unpickled, which can run code")
+    p.add_argument("new", help="where the data-only checkpoint goes")
+    p.set_defaults(func=cmd_convert_checkpoint)
     return parser
 
 

@@ -1,25 +1,52 @@
-"""Self-describing checkpoints.
+"""Self-describing checkpoints that hold only data.
 
 A checkpoint is a ``torch.save`` dict holding the package version, the environment, robot
 and observation it was trained on, the network and training configuration, the actor's
-weights and, for resuming, the whole trainer state. ``load_checkpoint`` checks the format;
+weights and, for resuming, the whole trainer state. Every value in it is plain data:
+tensors, ``str``, ``int``, ``float``, ``bool``, ``None``, lists, tuples and dicts (module
+and optimiser state dicts are ``OrderedDict``\\ s, also plain). ``save_checkpoint`` refuses
+anything else, and ``load_checkpoint`` reads with ``torch.load(weights_only=True)``, which
+rebuilds only such data and never calls code named in the file: policies are shared, and
+unpickling a file can run anything.
+
+Format version 2 is the data-only format. Version 1 files that are data only load as they
+are; older files holding pickled objects are refused, naming ``pointplan convert-checkpoint``
+(``pointplan.learning.convert``), the one place that unpickles a file, on request.
 ``check_compatible`` refuses an environment whose robot or observation differs.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import pickle
+import re
+import zipfile
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
 import torch
 
 FORMAT = "pointplan-checkpoint"
-VERSION = 1
+VERSION = 2
+#: versions this code reads (1: the same keys, written before checkpoints were checked for
+#: plain data; those that load with ``weights_only=True`` are data only)
+READABLE_VERSIONS = (1, 2)
+#: keys ``save_checkpoint`` writes itself
+HEADER_KEYS = ("format", "version")
+
+_SCALARS = (str, int, float, bool, type(None))
+_KEYS = (str, int)
+_TENSORS = (torch.Tensor, torch.nn.Parameter)
+PLAIN_TYPES = "tensors, str, int, float, bool, None, lists, tuples and dicts"
 
 
 class CheckpointError(ValueError):
     """A checkpoint that cannot be used here."""
+
+
+def convert_hint(path: str | Path) -> str:
+    return f"if you trust its source, convert it with `pointplan convert-checkpoint {path} NEW.pt`"
 
 
 def to_dict(obj: Any) -> Any:
@@ -31,30 +58,102 @@ def to_dict(obj: Any) -> Any:
     return obj
 
 
+def _type_name(obj: Any) -> str:
+    t = type(obj)
+    return t.__qualname__ if t.__module__ == "builtins" else f"{t.__module__}.{t.__qualname__}"
+
+
+def find_non_plain(obj: Any, where: str = "") -> str | None:
+    """The first value in ``obj`` that is not plain data, as ``"key/path (type)"``, or None.
+
+    Types are matched exactly: a numpy ``float64`` (a ``float`` subclass) or a named tuple is
+    not plain, since pickling it names a class. An ``OrderedDict``'s attributes (a module
+    state dict's ``_metadata``) are checked too; a container inside itself is refused.
+    """
+    stack: list[tuple[Any, str, frozenset[int]]] = [(obj, where, frozenset())]
+    while stack:
+        x, at, seen = stack.pop()
+        t = type(x)
+        if t in _SCALARS or t in _TENSORS:
+            continue
+        if t not in (dict, OrderedDict, list, tuple):
+            return f"{at or '/'} ({_type_name(x)})"
+        if id(x) in seen:
+            return f"{at or '/'} (contains itself)"
+        inner = seen | {id(x)}
+        if t is list or t is tuple:
+            stack.extend((v, f"{at}[{i}]", inner) for i, v in enumerate(x))
+            continue
+        for k, v in x.items():
+            if type(k) not in _KEYS:
+                return f"{at}/{k!r} (a key of type {_type_name(k)})"
+            stack.append((v, f"{at}/{k}", inner))
+        if t is OrderedDict and vars(x):
+            stack.append((dict(vars(x)), f"{at}.__dict__", inner))
+    return None
+
+
 def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> None:
+    """Write ``payload`` (plus format, version and package version) to ``path`` atomically.
+
+    Raises ``CheckpointError`` if a value is not plain data (see ``find_non_plain``): convert
+    dataclasses with ``to_dict``, numpy scalars with ``.item()`` and numpy arrays with
+    ``torch.from_numpy``.
+    """
     from .. import __version__
 
+    clash = [k for k in HEADER_KEYS if k in payload]
+    if clash:
+        raise CheckpointError(f"checkpoint payload may not set {', '.join(clash)}: save_checkpoint writes them")
+    bad = find_non_plain(payload)
+    if bad is not None:
+        raise CheckpointError(f"cannot save {bad}: a checkpoint holds only {PLAIN_TYPES}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    data = {"format": FORMAT, "version": VERSION, "package_version": __version__}
+    data: dict[str, Any] = {"format": FORMAT, "version": VERSION, "package_version": __version__}
     data.update(payload)
     tmp = path.with_suffix(path.suffix + ".tmp")
     torch.save(data, tmp)
     tmp.replace(path)
 
 
-def load_checkpoint(path: str | Path, device: str = "cpu") -> dict[str, Any]:
-    path = Path(path)
-    if not path.exists():
-        raise CheckpointError(f"{path}: no such checkpoint")
+def _first_line(e: BaseException) -> str:
+    lines = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {lines[0] if lines else ''}".rstrip(": ")
+
+
+def _read_data_only(path: Path, device: str) -> Any:
+    """``torch.load(weights_only=True)`` with one-line ``CheckpointError``\\ s."""
+    if not zipfile.is_zipfile(path):  # torch.save writes zip archives; nothing else is tried
+        raise CheckpointError(f"{path}: not a pointplan checkpoint (not a PyTorch zip archive: another kind of file, or truncated)")
     try:
-        data = torch.load(path, map_location=device, weights_only=False)
+        return torch.load(path, map_location=device, weights_only=True)
+    except pickle.UnpicklingError as e:
+        if "weights only load failed" not in str(e).lower():
+            raise CheckpointError(f"{path}: not a readable checkpoint ({_first_line(e)})") from None
+        found = re.search(r"GLOBAL ([\w.]+)", str(e))
+        what = f" ({found.group(1)})" if found else ""
+        raise CheckpointError(f"{path}: refused: it holds pickled Python objects{what}, which could run code when loaded; {convert_hint(path)}") from None
     except Exception as e:  # torch raises many kinds on a corrupt file
-        raise CheckpointError(f"{path}: not a readable checkpoint ({type(e).__name__}: {e})") from None
+        raise CheckpointError(f"{path}: not a readable checkpoint ({_first_line(e)})") from None
+
+
+def load_checkpoint(path: str | Path, device: str = "cpu") -> dict[str, Any]:
+    """Read a checkpoint without unpickling objects; check its format, version and contents."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"{path}: no such checkpoint")
+    data = _read_data_only(path, device)
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise CheckpointError(f"{path}: not a pointplan checkpoint")
-    if int(data.get("version", -1)) > VERSION:
-        raise CheckpointError(f"{path}: checkpoint version {data['version']} is newer than this pointplan understands ({VERSION})")
+    version = data.get("version")
+    if type(version) is not int or version < min(READABLE_VERSIONS):
+        raise CheckpointError(f"{path}: unknown checkpoint version {version!r}")
+    if version > VERSION:
+        raise CheckpointError(f"{path}: checkpoint version {version} is newer than this pointplan understands ({VERSION})")
+    bad = find_non_plain(data)
+    if bad is not None:  # possible only if someone allow-listed more types for torch.load
+        raise CheckpointError(f"{path}: refused: {bad} is not plain data; {convert_hint(path)}")
     return data
 
 
