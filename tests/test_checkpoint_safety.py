@@ -263,7 +263,7 @@ def test_convert_refuses_what_has_no_plain_form(tmp_path: Path, capsys: pytest.C
 
 
 # ------------------------------------------------------------------ the files in the repository
-@pytest.mark.parametrize("path", [shipped_checkpoint("narrow2d"), REPO / "checkpoints" / "narrow2d_bcsac_retry_1390k_last.pt"])
+@pytest.mark.parametrize("path", [shipped_checkpoint("disc2d"), REPO / "checkpoints" / "narrow2d_bcsac_retry_1390k_last.pt"])
 def test_committed_checkpoints_are_version_2_data_only(path: Path) -> None:
     if not path.exists():
         pytest.skip(f"{path} is not in this checkout")
