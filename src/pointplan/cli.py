@@ -205,18 +205,18 @@ def cmd_plan(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     from .evaluation import evaluate, format_table
     from .planners import make_planner
-    from .scenes.scenarios import Narrow2DScenario
-    from .viz.plot2d import render_grid
 
-    scenario = Narrow2DScenario()
+    scenario = _scenario(args)
     robot = scenario.robot
-    print(f"2D-Narrow: {args.episodes} test problems (workspaces never seen in training)")
-    problems = scenario.problems("test", args.episodes, seed=0)
-    planners = {
-        "policy": make_planner("policy", robot, checkpoint=args.checkpoint or "shipped"),
-        "birrt": make_planner("birrt", robot, seed=0),
-        "straight": make_planner("straight", robot),
-    }
+    episodes = args.episodes or (400 if robot.dim == 2 else 100)
+    print(f"{scenario.name} with {robot.name}: {episodes} test problems (workspaces never seen in training)")
+    problems = scenario.problems("test", episodes, seed=0)
+    observation = args.observation if args.checkpoint is None else None
+    try:
+        policy = make_planner("policy", robot, checkpoint=args.checkpoint or "shipped", observation=observation)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    planners = {"policy": policy, "birrt": make_planner("birrt", robot, seed=0, max_nodes=args.max_nodes), "straight": make_planner("straight", robot)}
     metrics, reports = {}, {}
     for name, planner in planners.items():
         reports[name] = evaluate(planner, problems, robot, progress=not args.quiet)
@@ -224,11 +224,38 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(format_table(metrics))
     # a few problems the policy solved, drawn with its paths
     solved = [i for i, r in enumerate(reports["policy"].records) if r.success][: args.figures]
+    if not solved:
+        print("the policy solved none of these problems: nothing to draw")
+        return 0
     shown = [problems[i] for i in solved]
     results = [planners["policy"].plan(p) for p in shown]
-    render_grid(shown, results, args.output, robot, titles=[f"{p.tag.split('/', 1)[-1]}  {r.nodes} steps" for p, r in zip(shown, results)])
-    print(f"wrote {args.output}")
+    if robot.dim == 2:
+        from .viz.plot2d import render_grid
+
+        render_grid(shown, results, args.output, robot, titles=[f"{p.tag.split('/', 1)[-1]}  {r.nodes} steps" for p, r in zip(shown, results)])
+        print(f"wrote {args.output}")
+        return 0
+    _demo_figures_3d(args, robot, shown, results, [planners["birrt"].plan(p) for p in shown])
     return 0
+
+
+def _demo_figures_3d(args: argparse.Namespace, robot: Any, shown: list[Any], policy: list[Any], birrt: list[Any]) -> None:
+    """The policy's paths (top row) and Bi-RRT's (bottom row) on the same problems, and a
+    GIF of the policy on the first one."""
+    from .evaluation.evaluate import timed_path
+    from .viz.plot3d import render_grid_3d, render_rollout_gif
+
+    shown, policy, birrt = shown[:4], policy[:4], birrt[:4]
+    name = lambda p: p.tag.split("/", 2)[-1]  # noqa: E731
+    titles = [f"policy  {name(p)}: {r.nodes} steps" for p, r in zip(shown, policy)]
+    titles += [f"Bi-RRT  {name(p)}: {r.nodes} nodes" for p, r in zip(shown, birrt)]
+    paths = [r.path for r in policy] + [r.path if r.success else None for r in birrt]
+    render_grid_3d(shown + shown, robot, paths, args.output, cols=len(shown), titles=titles)
+    print(f"wrote {args.output} (policy above, Bi-RRT below)")
+    gif = str(Path(args.output).with_suffix(".gif"))
+    scene = shown[0].scene
+    render_rollout_gif(shown[0], robot, timed_path(robot, policy[0].path), gif, obstacles_at=scene.obstacles_at if scene.dynamic else None)
+    print(f"wrote {gif} (the policy on {shown[0].tag})")
 
 
 def _net_config(args: argparse.Namespace) -> Any:
@@ -300,7 +327,18 @@ def cmd_bc(args: argparse.Namespace) -> int:
         workers=args.workers,
         demos_file=args.demos,
     )
-    summary = train_bc(cfg, args.run_dir, progress=not args.quiet)
+    if args.dagger_rounds or args.resume:
+        from .learning.dagger import DaggerConfig, train_dagger
+
+        dcfg = DaggerConfig(cfg, rounds=args.dagger_rounds, rollouts=args.rollouts, epochs_per_round=args.epochs_per_round, eval_episodes=args.eval_episodes)
+        if args.resume:
+            from .learning.checkpoint import load_checkpoint
+            from .learning.dagger import config_from_dict
+
+            dcfg = config_from_dict(load_checkpoint(args.resume)["dagger_config"], rounds=args.dagger_rounds or None)
+        summary = train_dagger(dcfg, args.run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume)
+    else:
+        summary = train_bc(cfg, args.run_dir, progress=not args.quiet)
     print(json.dumps(summary, indent=2))
     return 0
 
@@ -409,11 +447,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--epochs", type=int, default=30)
     p.add_argument("--workers", type=int, default=1, help="processes planning the demonstrations (default: %(default)s)")
     p.add_argument("--demos", help="demonstrations file (.npz): reused if it exists, written after planning otherwise")
+    p.add_argument("--dagger-rounds", type=int, default=0, help="DAgger rounds after cloning: the policy's failed rollouts labelled by Bi-RRT (default: 0, off)")
+    p.add_argument("--rollouts", type=int, default=400, help="DAgger: training problems attempted per round (default: %(default)s)")
+    p.add_argument("--epochs-per-round", type=float, default=2.0, help="DAgger: passes over all demonstrations per round (default: %(default)s)")
+    p.add_argument("--eval-episodes", type=int, default=200, help="DAgger: validation problems per round (default: %(default)s)")
+    p.add_argument("--init-actor", help="DAgger: start from this checkpoint's actor instead of cloning first")
+    p.add_argument("--resume", help="DAgger: continue a run from its last.pt (--dagger-rounds sets the new total)")
     p.set_defaults(func=cmd_bc)
 
-    p = sub.add_parser("demo", help="plan 2D-Narrow test problems and draw a few")
-    p.add_argument("--episodes", type=int, default=400, help="test problems (default: %(default)s)")
-    p.add_argument("--checkpoint", help="policy to show (default: the 2D-Narrow policy that ships with pointplan)")
+    p = sub.add_parser("demo", help="the shipped policy next to Bi-RRT and the straight line on test problems, with pictures")
+    _add_common(p)
+    p.add_argument("--episodes", type=int, help="test problems (default: 400 in 2D, 100 in 3D)")
     p.add_argument("--figures", type=int, default=8, help="problems drawn (default: %(default)s)")
     p.add_argument("-o", "--output", default="demo.png", help="figure (default: %(default)s)")
     p.add_argument("--quiet", action="store_true")

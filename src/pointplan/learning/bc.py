@@ -29,15 +29,17 @@ from .checkpoint import save_checkpoint, to_dict
 
 @dataclass
 class Demos:
-    """Expert steps: configuration, goal, action in [-1, 1], and the index of the scene."""
+    """Expert steps: configuration, goal, action in [-1, 1], and the index of the problem
+    (in ``problems``) each step belongs to."""
 
     q: np.ndarray
     goal: np.ndarray
     action: np.ndarray
     scene: np.ndarray
     problems: list[Problem]
-    #: problem index -> resampled path (what :func:`save_demos` keeps)
-    paths: dict[int, np.ndarray] = field(default_factory=dict)
+    #: the expert paths the steps were cut from: (problem index in the split, path in
+    #: steps); a path may start anywhere (DAgger labels states the policy visited)
+    paths: list[tuple[int, np.ndarray]] = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.q)
@@ -46,13 +48,14 @@ class Demos:
 def resample_path(robot: Robot, path: np.ndarray) -> np.ndarray:
     """Configurations along a path so that every consecutive pair is one action: the twist
     between them is within the robot's action scale on every axis."""
-    out = [np.asarray(path[0], np.float64)]
-    for a, b in zip(path[:-1], path[1:]):
-        v = robot.log(a, b)
-        n = max(1, int(np.ceil(np.max(np.abs(v) / robot.action_scale) - 1e-9)))
-        s = np.arange(1, n + 1) / n
-        out.extend(robot.interpolate(np.asarray(a)[None], np.asarray(b)[None], s))
-    return np.asarray(out)
+    from ..evaluation.evaluate import timed_path
+
+    return timed_path(robot, path)
+
+
+#: one demonstration to plan: (env, robot, split, problem index, problem seed, planner
+#: seed, max nodes, start or None for the problem's own)
+DemoJob = tuple[str, "str | None", str, int, int, int, int, "np.ndarray | None"]
 
 
 def _demo_index(seed: int, n_problems: int, i: int) -> int:
@@ -60,16 +63,53 @@ def _demo_index(seed: int, n_problems: int, i: int) -> int:
     return 1_000_000 + seed * n_problems + i
 
 
-def _plan_demo(job: tuple[str, str | None, str, int, int, int]) -> tuple[int, np.ndarray | None]:
-    """Solve one training problem with Bi-RRT and cut its path into policy steps (in a worker
-    process: the problem is rebuilt from its index, so only indices and arrays travel)."""
+def _plan_demo(job: DemoJob) -> tuple[int, np.ndarray | None]:
+    """Solve one training problem with Bi-RRT (from ``start`` if given) and cut its path into
+    policy steps. Runs in worker processes: the problem is rebuilt from its index, so only
+    indices and arrays travel."""
     from ..planners.birrt import BiRRT
 
-    env, robot_name, split, index, seed, max_nodes = job
+    env, robot_name, split, index, seed, planner_seed, max_nodes, start = job
     scenario = make_scenario(env, robot=robot_name)
     p = scenario.problem(split, index, seed=seed)
-    res = BiRRT(scenario.robot, max_nodes=max_nodes, seed=seed * 7_919 + index).plan(p)
+    if start is not None:
+        p = Problem(p.scene, start, p.goal, p.tag)
+    res = BiRRT(scenario.robot, max_nodes=max_nodes, seed=planner_seed).plan(p)
     return index, (resample_path(scenario.robot, res.path) if res.success else None)
+
+
+def _single_thread() -> None:
+    torch.set_num_threads(1)
+
+
+def demo_pool(workers: int) -> Any:
+    """A process pool for :func:`plan_demos` (``None`` for ``workers <= 1``)."""
+    if workers <= 1:
+        return None
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    return ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=_single_thread)
+
+
+def plan_demos(jobs: list[DemoJob], pool: Any = None, progress: bool = True, desc: str = "demonstrations") -> list[tuple[int, np.ndarray]]:
+    """Plan every job (in ``pool`` if given; each job has its own planner seed, so the
+    result does not depend on the workers); returns the solved ones in job order."""
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(jobs), desc=desc, unit="problem")
+    out: list[tuple[int, np.ndarray]] = []
+    results = pool.map(_plan_demo, jobs, chunksize=8) if pool is not None else map(_plan_demo, jobs)
+    for index, path in results:
+        if path is not None and len(path) > 1:
+            out.append((index, path))
+        if bar is not None:
+            bar.update()
+    if bar is not None:
+        bar.close()
+    return out
 
 
 def generate_demos(
@@ -81,68 +121,46 @@ def generate_demos(
     split: str = "train",
     workers: int = 1,
 ) -> Demos:
-    """Plan ``n_problems`` training problems with Bi-RRT and cut the paths into steps.
+    """Plan ``n_problems`` training problems with Bi-RRT and cut the paths into steps
+    (``workers`` processes)."""
+    robot_name = scenario.robot.name if scenario.robot.dim == 3 else None
+    index = [_demo_index(seed, n_problems, i) for i in range(n_problems)]
+    jobs: list[DemoJob] = [(scenario.name, robot_name, split, k, seed, seed * 7_919 + k, max_nodes, None) for k in index]
+    pool = demo_pool(workers)
+    try:
+        paths = plan_demos(jobs, pool, progress)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    return demos_from_paths(scenario, split, seed, paths)
 
-    ``workers > 1`` plans in that many processes (each problem has its own planner seed,
-    so the demonstrations do not depend on the number of workers)."""
+
+def demos_from_paths(scenario: Scenario, split: str, seed: int, paths: list[tuple[int, np.ndarray]]) -> Demos:
+    """The expert steps of ``paths`` (problem index in ``split``, path in steps)."""
     robot = scenario.robot
-    robot_name = robot.name if robot.dim == 3 else None
-    jobs = [(scenario.name, robot_name, split, _demo_index(seed, n_problems, i), seed, max_nodes) for i in range(n_problems)]
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=n_problems, desc="demonstrations", unit="problem")
-    paths: dict[int, np.ndarray | None] = {}
-    if workers > 1:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=_single_thread) as ex:
-            for index, path in ex.map(_plan_demo, jobs, chunksize=8):
-                paths[index] = path
-                if bar is not None:
-                    bar.update()
-    else:
-        for job in jobs:
-            index, path = _plan_demo(job)
-            paths[index] = path
-            if bar is not None:
-                bar.update()
-    if bar is not None:
-        bar.close()
-    return _demos_from_paths(scenario, split, seed, paths)
-
-
-def _single_thread() -> None:
-    torch.set_num_threads(1)
-
-
-def _demos_from_paths(scenario: Scenario, split: str, seed: int, paths: dict[int, np.ndarray | None]) -> Demos:
-    robot = scenario.robot
-    qs, goals, acts, idx, probs, keys = [], [], [], [], [], []
-    for index in sorted(paths):
-        path = paths[index]
-        if path is None:
-            continue
-        p = scenario.problem(split, index, seed=seed)
+    qs, goals, acts, idx = [], [], [], []
+    problems: dict[int, Problem] = {}
+    order: dict[int, int] = {}
+    for index, path in paths:
+        if index not in problems:
+            problems[index] = scenario.problem(split, index, seed=seed)
+            order[index] = len(order)
         a = robot.log(path[:-1], path[1:]) / robot.action_scale
         qs.append(path[:-1])
-        goals.append(np.broadcast_to(p.goal, path[:-1].shape))
+        goals.append(np.broadcast_to(problems[index].goal, path[:-1].shape))
         acts.append(np.clip(a, -1, 1))
-        idx.append(np.full(len(a), len(probs)))
-        probs.append(p)
-        keys.append(index)
-    kept = {k: p for k in keys if (p := paths[k]) is not None}
-    return Demos(np.concatenate(qs), np.concatenate(goals), np.concatenate(acts).astype(np.float32), np.concatenate(idx), probs, kept)
+        idx.append(np.full(len(a), order[index]))
+    if not qs:
+        raise ValueError("no demonstration was solved")
+    return Demos(np.concatenate(qs), np.concatenate(goals), np.concatenate(acts).astype(np.float32), np.concatenate(idx), list(problems.values()), list(paths))
 
 
 def save_demos(path: str | Path, scenario: Scenario, demos: Demos, split: str, seed: int) -> None:
-    """Keep the resampled demonstration paths (plain arrays) to reuse them in another run."""
-    paths = demos.paths
-    keys = np.array(sorted(paths), np.int64)
-    flat = np.concatenate([paths[int(k)] for k in keys]) if len(keys) else np.zeros((0, scenario.robot.config_dim))
-    lengths = np.array([len(paths[int(k)]) for k in keys], np.int64)
+    """Keep the demonstration paths (plain arrays) to reuse them in another run."""
+    keys = np.array([k for k, _ in demos.paths], np.int64)
+    lengths = np.array([len(p) for _, p in demos.paths], np.int64)
+    flat = np.concatenate([p for _, p in demos.paths]) if demos.paths else np.zeros((0, scenario.robot.config_dim))
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(path, env=scenario.name, robot=scenario.robot.name, split=split, seed=seed, index=keys, lengths=lengths, configs=flat)
 
 
@@ -152,10 +170,15 @@ def load_demos(path: str | Path, scenario: Scenario) -> Demos:
         if str(f["env"]) != scenario.name or str(f["robot"]) != scenario.robot.name:
             raise ValueError(f"{path}: demonstrations of {f['env']} / {f['robot']}, not {scenario.name} / {scenario.robot.name}")
         split, seed = str(f["split"]), int(f["seed"])
-        ends = np.cumsum(f["lengths"])
-        pieces = np.split(f["configs"], ends[:-1]) if len(ends) else []
-        paths: dict[int, np.ndarray | None] = {int(k): np.asarray(c) for k, c in zip(f["index"], pieces)}
-    return _demos_from_paths(scenario, split, seed, paths)
+        pieces = np.split(f["configs"], np.cumsum(f["lengths"])[:-1]) if len(f["lengths"]) else []
+        paths = [(int(k), np.asarray(c)) for k, c in zip(f["index"], pieces)]
+    return demos_from_paths(scenario, split, seed, paths)
+
+
+def observation_shape(robot: Robot, env: EnvConfig) -> tuple[int, ...]:
+    """The shape of one observation of ``env``'s observer."""
+    kwargs: dict[str, Any] = {} if env.observation == "image" else {"n_points": env.n_points}
+    return tuple(make_observer(str(env.observation), robot, **kwargs).space.shape)
 
 
 def observe_demos(demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Generator, chunk: int = 4096) -> np.ndarray:
@@ -210,48 +233,69 @@ def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: D
         if cfg.demos_file:
             save_demos(cfg.demos_file, scenario, demos, "train", cfg.seed)
     t_demos = time.perf_counter() - t0
-    obs = obs_input(robot, observe_demos(demos, robot, env, rng))
-    obs_shape = tuple(obs.shape[1:])
+    obs_shape = observation_shape(robot, env)
     device = torch.device(cfg.device)
     actor = Actor(obs_shape, robot.twist_dim, robot.twist_dim, cfg.net).to(device)
     opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr)
-    goal_vec = goal_input(robot, demos.q, demos.goal)
-    act = torch.as_tensor(demos.action, device=device)
-    g_all = torch.as_tensor(goal_vec, device=device)
-    losses = []
-    epochs = range(cfg.epochs)
-    if progress:
-        from tqdm import tqdm
+    losses = fit_actor(actor, opt, demos, robot, env, cfg.epochs, cfg.batch_size, rng, cfg.refresh_every, progress)
+    payload = policy_payload(cfg, robot.name, obs_shape, actor, scenario.horizon)
+    save_checkpoint(run_dir / "bc.pt", {**payload, "bc_config": to_dict(cfg), "demo_steps": len(demos)})
+    return {"checkpoint": str(run_dir / "bc.pt"), "demo_steps": len(demos), "demo_problems": len(demos.problems), "demo_time_s": t_demos, "train_time_s": time.perf_counter() - t0 - t_demos, "final_loss": losses[-1] if losses else float("nan")}
 
-        epochs = tqdm(epochs, desc="behavioural cloning", unit="epoch")
-    for ep in epochs:
-        if cfg.refresh_every and ep > 0 and ep % cfg.refresh_every == 0:
-            obs = obs_input(robot, observe_demos(demos, robot, env, rng))
-        o_all = torch.as_tensor(obs, device=device)
-        perm = torch.as_tensor(rng.permutation(len(demos)), device=device)
-        total = 0.0
-        for s in range(0, len(perm), cfg.batch_size):
-            b = perm[s : s + cfg.batch_size]
-            pred = actor.act(o_all[b], g_all[b])
-            loss = ((pred - act[b]) ** 2).sum(-1).mean()
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            total += float(loss.detach()) * len(b)
-        losses.append(total / len(perm))
-        if progress:
-            epochs.set_postfix(loss=f"{losses[-1]:.4f}")  # type: ignore[attr-defined]
-    payload = {
+
+def policy_payload(cfg: BCConfig, robot: str, obs_shape: tuple[int, ...], actor: Actor, horizon: int) -> dict[str, Any]:
+    """What a policy checkpoint holds (:class:`~pointplan.models.policy.Policy` reads it)."""
+    return {
         "env": cfg.env,
-        "robot": robot.name,
+        "robot": robot,
         "observation": cfg.observation,
         "n_points": cfg.n_points,
         "obs_shape": list(obs_shape),
         "net": to_dict(cfg.net),
-        "bc_config": to_dict(cfg),
         "actor": actor.state_dict(),
-        "demo_steps": len(demos),
-        "horizon": scenario.horizon,
+        "horizon": horizon,
     }
-    save_checkpoint(run_dir / "bc.pt", payload)
-    return {"checkpoint": str(run_dir / "bc.pt"), "demo_steps": len(demos), "demo_problems": len(demos.problems), "demo_time_s": t_demos, "train_time_s": time.perf_counter() - t0 - t_demos, "final_loss": losses[-1] if losses else float("nan")}
+
+
+def fit_actor(
+    actor: Actor,
+    opt: torch.optim.Optimizer,
+    demos: Demos,
+    robot: Robot,
+    env: EnvConfig,
+    epochs: float,
+    batch_size: int,
+    rng: np.random.Generator,
+    refresh_every: int = 5,
+    progress: bool = True,
+) -> list[float]:
+    """Fit the actor's mean action to the demonstrations (L2) for ``epochs`` passes (a
+    fraction runs part of one); new observation subsets every ``refresh_every`` epochs.
+    Returns the mean loss of each pass."""
+    device = next(actor.parameters()).device
+    act = torch.as_tensor(demos.action, device=device)
+    g_all = torch.as_tensor(goal_input(robot, demos.q, demos.goal), device=device)
+    losses: list[float] = []
+    passes = range(int(np.ceil(epochs)))
+    if progress:
+        from tqdm import tqdm
+
+        passes = tqdm(passes, desc="behavioural cloning", unit="epoch")
+    obs = None
+    for ep in passes:
+        if obs is None or (refresh_every and ep % refresh_every == 0):
+            obs = torch.as_tensor(obs_input(robot, observe_demos(demos, robot, env, rng)), device=device)
+        n = len(demos) if ep + 1 <= epochs else int(len(demos) * (epochs - ep))
+        perm = torch.as_tensor(rng.permutation(len(demos))[:n], device=device)
+        total = 0.0
+        for s in range(0, len(perm), batch_size):
+            b = perm[s : s + batch_size]
+            loss = ((actor.act(obs[b], g_all[b]) - act[b]) ** 2).sum(-1).mean()
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            total += float(loss.detach()) * len(b)
+        losses.append(total / max(len(perm), 1))
+        if progress:
+            passes.set_postfix(loss=f"{losses[-1]:.4f}")  # type: ignore[attr-defined]
+    return losses

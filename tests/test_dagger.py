@@ -1,0 +1,67 @@
+"""Demonstrations in worker processes, their files, and DAgger rounds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pointplan.learning.bc import BCConfig, generate_demos, load_demos, save_demos
+from pointplan.learning.checkpoint import load_checkpoint
+from pointplan.learning.dagger import DaggerConfig, config_from_dict, train_dagger
+from pointplan.models.actor_critic import NetConfig
+from pointplan.models.encoders import EncoderConfig
+from pointplan.models.policy import Policy
+from pointplan.scenes.scenarios import Narrow2DScenario, make_scenario
+
+SMALL = NetConfig(EncoderConfig(width=16, layers=2), head_width=16, head_layers=2, critic_action="pooled", shared_encoder=True)
+
+
+def test_parallel_demos_equal_serial_ones_and_survive_a_file(tmp_path: Path) -> None:
+    scenario = make_scenario("boxes3d", robot="sphere3d")
+    serial = generate_demos(scenario, 6, seed=3, progress=False)
+    parallel = generate_demos(scenario, 6, seed=3, progress=False, workers=2)
+    assert len(serial) > 6
+    for a, b in ((serial.q, parallel.q), (serial.action, parallel.action), (serial.goal, parallel.goal)):
+        assert np.array_equal(a, b)
+    save_demos(tmp_path / "d.npz", scenario, serial, "train", 3)
+    back = load_demos(tmp_path / "d.npz", scenario)
+    assert np.array_equal(back.q, serial.q) and np.array_equal(back.action, serial.action) and np.array_equal(back.scene, serial.scene)
+    # every demonstration step is one action of the robot, along a Bi-RRT path to the goal
+    assert np.all(np.abs(serial.action) <= 1 + 1e-9)
+    for (_, path), p in zip(serial.paths, serial.problems):
+        assert np.allclose(path[0], p.start) and np.allclose(path[-1], p.goal)
+
+
+def test_demos_of_another_robot_are_refused(tmp_path: Path) -> None:
+    scenario = make_scenario("boxes3d", robot="sphere3d")
+    save_demos(tmp_path / "d.npz", scenario, generate_demos(scenario, 2, progress=False), "train", 0)
+    try:
+        load_demos(tmp_path / "d.npz", make_scenario("boxes3d", robot="sshape"))
+    except ValueError as e:
+        assert "sphere3d" in str(e)
+    else:
+        raise AssertionError("loaded demonstrations of another robot")
+
+
+def test_dagger_rounds_add_expert_labels_and_resume(tmp_path: Path) -> None:
+    bc = BCConfig(n_problems=20, epochs=2, net=SMALL, refresh_every=0)
+    cfg = DaggerConfig(bc, rounds=2, rollouts=12, labels_per_failure=2, epochs_per_round=1, eval_episodes=10)
+    out = train_dagger(cfg, tmp_path, progress=False)
+    rows = (tmp_path / "metrics.csv").read_text().splitlines()
+    assert len(rows) == 3 and rows[0].startswith("round,")
+    first = load_demos(tmp_path / "demos.npz", Narrow2DScenario())
+    assert len(first) == out["demo_steps"]
+    labels = [int(r.split(",")[3]) for r in rows[1:]]
+    assert sum(labels) > 0  # an untrained policy fails, and Bi-RRT labels its states
+    # a label starts where the policy was, not at the problem's start
+    starts = {tuple(p.start) for p in first.problems}
+    assert any(tuple(path[0]) not in starts for _, path in first.paths)
+    state = load_checkpoint(tmp_path / "last.pt")
+    assert state["dagger"]["round"] == 2
+    resumed = config_from_dict(state["dagger_config"], rounds=3)
+    train_dagger(resumed, tmp_path, progress=False, resume=tmp_path / "last.pt")
+    rows = (tmp_path / "metrics.csv").read_text().splitlines()
+    assert [r.split(",")[0] for r in rows[1:]] == ["1", "2", "3"]
+    assert len(load_demos(tmp_path / "demos.npz", Narrow2DScenario())) >= len(first)
+    assert Policy.from_checkpoint(tmp_path / "best.pt").observation == "surface-normals"
