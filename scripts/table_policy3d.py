@@ -1,0 +1,97 @@
+"""The paper's Table 3 / Table 4 cells for a 3D robot: the shipped policies and Bi-RRT on
+the test problems of every 3D scene, with the paper's success beside ours.
+
+    python scripts/table_policy3d.py --robot sphere3d --episodes 400            # run and print
+    python scripts/table_policy3d.py --robot sphere3d --table-only              # print from the JSONs
+
+Each cell is written to ``docs/data/policy3d/{robot}_{scene}_{planner}.json`` (the metrics
+of ``pointplan eval``); ``--table-only`` reads them back. Policies come from the package
+(``--checkpoint-global`` / ``--checkpoint-local`` evaluate other files).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from pointplan.evaluation import evaluate
+from pointplan.planners import make_planner
+from pointplan.scenes.scenarios import make_scenario
+
+#: the paper's success (%): Table 3 (trained on 3D-Boxes) and Table 4 (3D-Qureshi)
+PAPER = {
+    "sphere3d": {
+        "global": {"boxes3d": 95.8, "synthetic3d": 91.3, "ycb3d": 91.2, "dynamic3d": 94.7, "qureshi3d": 100.0},
+        "local": {"boxes3d": 99.3, "synthetic3d": 87.0, "ycb3d": 87.7, "dynamic3d": 95.8},
+    },
+    "sshape": {
+        "global": {"boxes3d": 89.0, "synthetic3d": 85.3, "ycb3d": 88.7, "dynamic3d": 86.0},
+        "local": {"boxes3d": 97.0, "synthetic3d": 87.3, "ycb3d": 96.0, "dynamic3d": 79.7},
+    },
+}
+SCENES = ["boxes3d", "synthetic3d", "ycb3d", "dynamic3d", "qureshi3d"]
+OUT = Path("docs/data/policy3d")
+
+
+def cell_path(robot: str, scene: str, planner: str) -> Path:
+    return OUT / f"{robot}_{scene}_{planner}.json"
+
+
+def run(args: argparse.Namespace) -> None:
+    for scene in args.scenes:
+        scenario = make_scenario(scene, robot=args.robot)
+        problems = scenario.problems("test", args.episodes, seed=0)
+        for planner_name in args.planners:
+            if planner_name.startswith("policy-"):
+                obs = planner_name.split("-", 1)[1]
+                if obs not in PAPER[args.robot] or scene not in PAPER[args.robot][obs]:
+                    continue
+                planner = make_planner("policy", scenario.robot, checkpoint=getattr(args, f"checkpoint_{obs}"), observation=obs)
+            else:
+                planner = make_planner(planner_name, scenario.robot, seed=0)
+            report = evaluate(planner, problems, scenario.robot, progress=not args.quiet)
+            m = report.metrics()
+            cell_path(args.robot, scene, planner_name).parent.mkdir(parents=True, exist_ok=True)
+            cell_path(args.robot, scene, planner_name).write_text(json.dumps({**m, "env": scene, "robot": args.robot, "planner": planner_name, "seed": 0}, indent=2) + "\n")
+            print(f"{scene} {planner_name}: {100 * m['success_rate']:.1f}%", flush=True)
+
+
+def table(robot: str) -> str:
+    lines = [
+        "| planner | scene | paper success | success | steps / nodes (mean) | collision checks (mean) | path length (mean) | time per problem (mean / median) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for planner in ("policy-global", "policy-local", "birrt"):
+        for scene in SCENES:
+            p = cell_path(robot, scene, planner)
+            if not p.exists():
+                continue
+            d = json.loads(p.read_text())
+            obs = planner.split("-", 1)[1] if planner.startswith("policy-") else None
+            paper = PAPER[robot][obs].get(scene) if obs else None
+            lines.append(
+                f"| {planner} | {scene} | {'-' if paper is None else f'{paper:.1f}%'} | {100 * d['success_rate']:.1f}% | {d['nodes_mean']:.1f} | "
+                f"{d['collision_checks_mean']:,.0f} | {d['path_length_mean']:.3f} | {1000 * d['time_mean_s']:.1f} / {1000 * d['time_median_s']:.1f} ms |"
+            )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--robot", default="sphere3d", choices=["sphere3d", "sshape"])
+    ap.add_argument("--episodes", type=int, default=400)
+    ap.add_argument("--scenes", nargs="+", default=SCENES)
+    ap.add_argument("--planners", nargs="+", default=["policy-global", "policy-local", "birrt"])
+    ap.add_argument("--checkpoint-global", help="policy on global points (default: the shipped one)")
+    ap.add_argument("--checkpoint-local", help="policy on ray-cast points (default: the shipped one)")
+    ap.add_argument("--table-only", action="store_true")
+    ap.add_argument("--quiet", action="store_true")
+    args = ap.parse_args()
+    if not args.table_only:
+        run(args)
+    print(table(args.robot))
+
+
+if __name__ == "__main__":
+    main()
