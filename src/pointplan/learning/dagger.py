@@ -26,7 +26,19 @@ from ..envs.core import EnvConfig
 from ..models.actor_critic import Actor
 from ..models.policy import Policy
 from ..scenes.scenarios import Scenario, make_scenario
-from .bc import BCConfig, DemoJob, demo_pool, demos_from_paths, fit_actor, generate_demos, load_demos, observation_shape, plan_demos, policy_payload, save_demos
+from .bc import (
+    BCConfig,
+    DemoJob,
+    demo_pool,
+    demos_from_paths,
+    fit_actor,
+    generate_demos,
+    load_demos,
+    observation_shape,
+    plan_demos,
+    policy_payload,
+    save_demos,
+)
 from .checkpoint import load_checkpoint, save_checkpoint, to_dict
 
 
