@@ -251,7 +251,25 @@ def estimate_normals(
         centroid = (sums / counts[:, None])[labels]
         o = np.einsum("pi,pi->p", n, p - centroid)
         off[~decided] = o[~decided]
-    return n * np.where(off < 0, -1.0, 1.0)[:, None]
+    n = n * np.where(off < 0, -1.0, 1.0)[:, None]
+    return _agree(p, n, idx[:, : max(2, min(k, idx.shape[1]))], dist[:, : max(2, min(k, idx.shape[1]))])
+
+
+def _agree(p: Array, n: Array, idx: NDArray[np.int64], dist: Array, rounds: int = 3) -> Array:
+    """Flip normals that disagree with most neighbours on the same face: neighbours close
+    to the point's tangent plane (within half a spacing) whose normals are nearly parallel
+    vote with the sign of the dot product. Walls seen from both sides do not vote against
+    each other, as the far side lies off the tangent plane."""
+    spacing = np.maximum(dist[:, 1:].mean(axis=1), 1e-12)
+    for _ in range(rounds):
+        dots = np.einsum("pi,pki->pk", n, n[idx])
+        planar = np.abs(np.einsum("pi,pki->pk", n, p[idx] - p[:, None, :])) < 0.5 * spacing[:, None]
+        vote = np.where(planar & (np.abs(dots) > 0.7), np.sign(dots), 0.0).sum(axis=1)
+        flip = vote < 0
+        if not flip.any():
+            break
+        n = np.where(flip[:, None], -n, n)
+    return n
 
 
 # ============================================================================ depth images

@@ -461,6 +461,49 @@ def load_scene(path: str | os.PathLike[str]) -> SceneFile:
     return _Reader(name, path.parent).document(doc)
 
 
+def load_points_scene(
+    path: str | os.PathLike[str],
+    dim: int | None = None,
+    bounds: tuple[Sequence[float], Sequence[float]] | None = None,
+    pad: float = 0.1,
+    k: int = DEFAULT_K,
+    viewpoint: Sequence[float] | None = None,
+) -> Scene:
+    """A scene made of one point file (``.ply``, ``.pcd``, ``.npy``, ``.xyz``, ...), as a
+    ``points`` obstacle of a scene file would read it (normals estimated when the file has
+    none).
+
+    ``dim`` defaults to 2 for a cloud of 2 columns or a flat one (z = 0 everywhere), else
+    3. ``bounds`` is ``(low, high)``; without it the cloud's bounding box is grown by
+    ``pad`` times its largest side on every side. Errors are :class:`SceneFormatError`
+    naming the file.
+    """
+    path = Path(path)
+    name = str(path)
+    reader = _Reader(name, path.parent)
+    if not path.is_file():
+        raise SceneFormatError(name, "", "file not found")
+    if dim is None:
+        try:
+            points, _ = read_point_file(path)
+        except CloudError as exc:
+            raise SceneFormatError(name, "", str(exc)) from None
+        dim = 2 if points.shape[1] == 2 or (points.shape[1] == 3 and np.all(points[:, 2] == 0.0)) else 3
+    entry: dict[str, Any] = {"type": "points", "path": str(path.resolve()), "k": int(k)}
+    if viewpoint is not None:
+        entry["viewpoint"] = [float(x) for x in viewpoint]
+    cloud = reader.points_obstacle(entry, "", dim)
+    if bounds is None:
+        lo, hi = cloud.points.min(0), cloud.points.max(0)
+        margin = pad * max(float(np.max(hi - lo)), 1e-3)
+        low, high = lo - margin, hi + margin
+    else:
+        low, high = (np.asarray(b, np.float64).reshape(-1) for b in bounds)
+        if low.shape != (dim,) or high.shape != (dim,) or np.any(high <= low):
+            raise SceneFormatError(name, "bounds", f"expected {dim} numbers low and high with low < high, got {low.tolist()} and {high.tolist()}")
+    return Scene(obstacles=[cloud], low=low, high=high, name=path.stem)
+
+
 # ============================================================================ writing
 def _floats(a: Array) -> list[float]:
     return [float(x) for x in np.asarray(a, np.float64).reshape(-1)]
