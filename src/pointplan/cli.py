@@ -480,7 +480,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("plan", help="plan the problems of a scene file, of a point cloud file (or of --env)")
     _add_common(p)
     p.add_argument("--points", help="plan among the points of a cloud file (.ply, .pcd, .npy, .xyz, .txt, .csv; normals estimated if it has none) instead of a scene file")
-    p.add_argument("--bounds", help="with --points: the workspace as low then high, e.g. 0,0,1,1 (default: the cloud's box grown by 10%% of its largest side)")
+    p.add_argument("--bounds", help="with --points: the workspace as low then high, e.g. 0,0,1,1; write --bounds=-1,... when the first number is negative (default: the cloud's box grown by 10%% of its largest side)")
     p.add_argument("--start", help="plan this start (with --goal) instead of the scene's problems, e.g. 0.1,0.1")
     p.add_argument("--goal", help="the goal of --start, e.g. 0.9,0.9 (an S-shape takes x,y,z or x,y,z,qx,qy,qz,qw)")
     p.add_argument("--episodes", type=int, default=10, help="problems to draw when the scene file has none")
