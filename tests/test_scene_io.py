@@ -370,10 +370,11 @@ CASES_2D = [
     ("obstacles[2].radius", 0, "obstacles[2].radius", "expected a positive number, got 0"),
     ("obstacles[3].path", "nowhere.npy", "obstacles[3].path", "file not found: 'nowhere.npy'"),
     ("obstacles[3].path", 3, "obstacles[3].path", "expected a file name"),
-    ("obstacles[3].path", "wall2d.ply", "obstacles[3].path", "unsupported file type '.ply'"),
-    ("obstacles[3].path", "wall3d.npy", "obstacles[3].path", r"expected an array \(P, 4\).*got shape \(5, 6\)"),
+    ("obstacles[3].path", "wall2d.obj", "obstacles[3].path", "unsupported file type '.obj'"),
+    ("obstacles[3].path", "wall3d.npy", "obstacles[3].path", r"'wall3d.npy' holds 3D points \(z is not 0 everywhere\) but the scene is 2D"),
+    ("obstacles[3].path", "wide.npy", "obstacles[3].path", r"expected an array \(P, 2\) or \(P, 3\) of points.*got shape \(5, 5\)"),
     ("obstacles[3].path", "bad.csv", "obstacles[3].path", "cannot read points file 'bad.csv'"),
-    ("obstacles[3].path", "nan.npy", "obstacles[3].path", "contains NaN or infinite values"),
+    ("obstacles[3].path", "nan.npy", "obstacles[3].path", "contains NaN or infinite"),
     ("problems", {}, "problems", "expected a list"),
     ("problems[0]", [0.1, 0.1], "problems[0]", "expected an object, got a list"),
     ("problems[0].goal", DELETE, "problems[0].goal", "missing required field"),
@@ -403,8 +404,8 @@ CASES_3D = [
     ("obstacles[4].scale", [1, 1], "obstacles[4].scale", "expected 3 positive numbers"),
     ("obstacles[4].position", [0, 0], "obstacles[4].position", "expected 3 numbers"),
     ("obstacles[4].quaternion", "identity", "obstacles[4].quaternion", "expected 4 numbers"),
-    ("obstacles[5].path", "wall2d.npy", "obstacles[5].path", r"expected an array \(P, 6\).*got shape \(20, 4\)"),
-    ("obstacles[5].path", "flat.npy", "obstacles[5].path", r"expected an array \(P, 6\).*got shape \(6,\)"),
+    ("obstacles[5].path", "wall2d.npy", "obstacles[5].path", r"'wall2d.npy' holds 2D points but the scene is 3D"),
+    ("obstacles[5].path", "flat.npy", "obstacles[5].path", r"expected an array .*got shape \(6,\)"),
     ("problems[0].start", [0.6, 0.0, 0.3], "problems[0].start", "expected 7 numbers"),
     ("problems[0].goal", [-0.6, 0.0, 1.7, 0, 0, 0, 0], "problems[0].goal", "orientation quaternion .* is zero"),
     ("problems[0].goal", [-0.6, 0.0, 2.5, 0, 0, 0, 1], "problems[0].goal", "lies outside the bounds"),
@@ -412,7 +413,8 @@ CASES_3D = [
 
 
 def write_bad_assets(d: Path) -> None:
-    np.save(d / "wall3d.npy", np.zeros((5, 6)))
+    np.save(d / "wall3d.npy", np.c_[np.ones((5, 3)), np.ones((5, 3))])
+    np.save(d / "wide.npy", np.zeros((5, 5)))
     np.save(d / "flat.npy", np.zeros(6))
     np.save(d / "nan.npy", np.full((3, 4), np.nan))
     (d / "bad.csv").write_text("0.1,0.2,zero,1\n")

@@ -18,19 +18,68 @@ class CLIError(Exception):
 
 
 # ---------------------------------------------------------------------------- helpers
+def _numbers(text: str | None, what: str) -> np.ndarray | None:
+    if text is None:
+        return None
+    try:
+        return np.array([float(x) for x in text.replace(",", " ").split()], np.float64)
+    except ValueError:
+        raise CLIError(f"{what}: expected numbers separated by commas, got {text!r}") from None
+
+
+def _given_problem(args: argparse.Namespace, scene: Any, robot: Any) -> list[Any]:
+    """The problem of --start/--goal (none if neither is given)."""
+    from .scenes import Problem
+
+    start, goal = _numbers(getattr(args, "start", None), "--start"), _numbers(getattr(args, "goal", None), "--goal")
+    if start is None and goal is None:
+        return []
+    if start is None or goal is None:
+        raise CLIError("give both --start and --goal (or neither, to draw problems)")
+    qs = []
+    for q, what in ((start, "--start"), (goal, "--goal")):
+        if robot.config_dim == 7 and len(q) == 3:
+            q = np.concatenate([q, [0.0, 0.0, 0.0, 1.0]])  # position only: the body upright
+        if len(q) != robot.config_dim:
+            raise CLIError(f"{what}: a configuration of {robot.name} has {robot.config_dim} numbers, got {len(q)}")
+        if robot.config_dim == 7:
+            q = np.concatenate([q[:3], q[3:] / np.linalg.norm(q[3:])])
+        if np.any(q[: scene.dim] < scene.low) or np.any(q[: scene.dim] > scene.high):
+            raise CLIError(f"{what}: position {q[: scene.dim].tolist()} lies outside the bounds {scene.low.tolist()} .. {scene.high.tolist()}")
+        qs.append(q)
+    return [Problem(scene, qs[0], qs[1], tag=f"{scene.name}/given")]
+
+
 def _scenario(args: argparse.Namespace) -> Any:
     from .robots import make_robot
     from .scenes.scenarios import FixedScenario, make_scenario
 
-    if getattr(args, "scene", None):
-        from .scenes.io import load_scene
+    if getattr(args, "scene", None) and getattr(args, "points", None):
+        raise CLIError("give either --scene or --points, not both")
+    if getattr(args, "scene", None) or getattr(args, "points", None):
+        from .scenes.io import load_points_scene, load_scene
 
-        sf = load_scene(args.scene)
-        robot_name = getattr(args, "robot", None) or sf.robot or ("disc2d" if sf.scene.dim == 2 else "sphere3d")
+        robot_arg = getattr(args, "robot", None)
+        if getattr(args, "points", None):
+            dim = make_robot(robot_arg).dim if robot_arg else None
+            bounds = _numbers(getattr(args, "bounds", None), "--bounds")
+            if bounds is not None:
+                if len(bounds) not in (4, 6):
+                    raise CLIError(f"--bounds: expected low then high (4 numbers in 2D, 6 in 3D), got {len(bounds)}")
+                if dim is not None and len(bounds) != 2 * dim:
+                    raise CLIError(f"--bounds: {robot_arg} moves in {dim}D, got {len(bounds)} numbers")
+                dim = len(bounds) // 2
+            scene = load_points_scene(args.points, dim=dim, bounds=None if bounds is None else (bounds[:dim], bounds[dim:]))
+            sf_robot, fixed = None, []
+        else:
+            sf = load_scene(args.scene)
+            scene, sf_robot, fixed = sf.scene, sf.robot, sf.problems
+        robot_name = robot_arg or sf_robot or ("disc2d" if scene.dim == 2 else "sphere3d")
         robot = make_robot(robot_name)
-        if robot.dim != sf.scene.dim:
-            raise CLIError(f"robot {robot_name} is {robot.dim}D but the scene is {sf.scene.dim}D")
-        return FixedScenario(sf.scene, robot, fixed=sf.problems)
+        if robot.dim != scene.dim:
+            raise CLIError(f"robot {robot_name} is {robot.dim}D but the scene is {scene.dim}D")
+        given = _given_problem(args, scene, robot)
+        return FixedScenario(scene, robot, fixed=given or fixed)
     try:
         return make_scenario(args.env, robot=getattr(args, "robot", None))
     except ValueError as e:
@@ -187,12 +236,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     planner = _planner(args.planner, scenario.robot, args, args.seed)
     report = evaluate(planner, problems, scenario.robot, progress=not args.quiet)
     print(format_table({args.planner: report.metrics()}))
-    if args.output and scenario.robot.dim == 2:
-        from .viz.plot2d import render_problem
-
-        result = planner.plan(problems[0])
-        render_problem(problems[0], args.output, scenario.robot, result=result, seed=args.seed)
-        print(f"wrote {args.output}")
+    if args.output:
+        _draw_plan(args, scenario.robot, problems[0], report.records[0], planner)
     if args.json:
         paths = []
         for rec in report.records:
@@ -200,6 +245,24 @@ def cmd_plan(args: argparse.Namespace) -> int:
         _write_json(args.json, {"metrics": report.metrics(), "problems": paths})
     ok = all(check_path(scenario.robot, p, r.path) for p, r in zip(problems, report.records) if r.success)
     return 0 if ok else 1
+
+
+def _draw_plan(args: argparse.Namespace, robot: Any, problem: Any, result: Any, planner: Any) -> None:
+    """The first problem, its obstacles (point clouds as their points) and the path of the
+    evaluation's ``result``, in 2D (planned again, to draw Bi-RRT's trees) or 3D."""
+    Path(args.output).parent.mkdir(parents=True, exist_ok=True)
+    path = np.asarray(result.path) if len(result.path) else None
+    if robot.dim == 2:
+        from .viz.plot2d import render_problem
+
+        render_problem(problem, args.output, robot, result=planner.plan(problem), seed=args.seed)
+    else:
+        from .viz.plot3d import render_problem_3d
+
+        verdict = "solved" if result.success else "not solved"
+        title = f"{problem.tag}: {args.planner}, {verdict}"
+        render_problem_3d(problem, robot, path=path, output=args.output, title=title, obstacles=problem.scene.obstacles_at(0))
+    print(f"wrote {args.output}")
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -414,8 +477,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--host", default="127.0.0.1", help="0.0.0.0 to serve other machines (default: %(default)s)")
     p.set_defaults(func=cmd_view)
 
-    p = sub.add_parser("plan", help="plan the problems of a scene file (or of --env)")
+    p = sub.add_parser("plan", help="plan the problems of a scene file, of a point cloud file (or of --env)")
     _add_common(p)
+    p.add_argument("--points", help="plan among the points of a cloud file (.ply, .pcd, .npy, .xyz, .txt, .csv; normals estimated if it has none) instead of a scene file")
+    p.add_argument("--bounds", help="with --points: the workspace as low then high, e.g. 0,0,1,1; write --bounds=-1,... when the first number is negative (default: the cloud's box grown by 10%% of its largest side)")
+    p.add_argument("--start", help="plan this start (with --goal) instead of the scene's problems, e.g. 0.1,0.1")
+    p.add_argument("--goal", help="the goal of --start, e.g. 0.9,0.9 (an S-shape takes x,y,z or x,y,z,qx,qy,qz,qw)")
     p.add_argument("--episodes", type=int, default=10, help="problems to draw when the scene file has none")
     p.add_argument("-o", "--output", help="draw the first problem to this PNG")
     p.add_argument("--json", help="write metrics and paths to this file")

@@ -186,8 +186,23 @@ def _box_area_samples(box: Box, n: int, rng: np.random.Generator) -> tuple[Array
     return local @ box.rotation.T + box.center, nrm @ box.rotation.T
 
 
+def cloud_area(cloud: PointCloud) -> float:
+    """The surface a point cloud covers, estimated as one square of the typical point
+    spacing (the median nearest-neighbour distance) per point."""
+    from scipy.spatial import cKDTree
+
+    p = cloud.points
+    if len(p) < 2:
+        return 0.0
+    dist, _ = cKDTree(p).query(p, k=2)
+    return float(len(p) * np.median(dist[:, 1]) ** 2)
+
+
 def shape_area(s: Shape) -> float:
-    """Surface area of a 3D shape (tessellated for capsules, cylinders, cones, meshes)."""
+    """Surface area of a 3D shape (tessellated for capsules, cylinders, cones, meshes;
+    estimated from the spacing of its points for a point cloud)."""
+    if isinstance(s, PointCloud):
+        return cloud_area(s)
     if isinstance(s, Box):
         a, b, c = s.size
         return float(2 * (a * b + b * c + a * c))
@@ -200,13 +215,16 @@ def area_weighted_points(shapes: Sequence[Shape], n: int, rng: np.random.Generat
     """``n`` points drawn uniformly on the obstacles' surfaces (each shape gets points in
     proportion to its area) with outward normals, and the index of the shape each lies on.
 
-    Boxes and spheres are sampled exactly; other shapes on their tessellation (face
-    normals). With ``drop_hidden``, points strictly inside another obstacle are discarded,
+    Boxes and spheres are sampled exactly; point clouds give their own points and normals
+    (drawn without replacement while they last); other shapes are sampled on their
+    tessellation (face normals). With ``drop_hidden``, points strictly inside another obstacle are discarded,
     so fewer than ``n`` may come back."""
-    shapes = [s for s in shapes if not isinstance(s, PointCloud)]
+    shapes = list(shapes)
     if not shapes or n <= 0:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64)
     areas = np.array([shape_area(s) for s in shapes])
+    if not areas.sum() > 0:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64)
     counts = rng.multinomial(n, areas / areas.sum())
     pts, nrm, own = [], [], []
     for k, (s, c) in enumerate(zip(shapes, counts)):
@@ -214,6 +232,9 @@ def area_weighted_points(shapes: Sequence[Shape], n: int, rng: np.random.Generat
             continue
         if isinstance(s, Box):
             p, nn = _box_area_samples(s, int(c), rng)
+        elif isinstance(s, PointCloud):
+            pick = rng.choice(len(s.points), size=int(c), replace=int(c) > len(s.points))
+            p, nn = s.points[pick], s.normals[pick]
         elif isinstance(s, Sphere):
             nn = rng.normal(size=(int(c), 3))
             nn /= np.linalg.norm(nn, axis=1, keepdims=True)

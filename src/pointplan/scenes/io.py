@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry import lie
+from ..geometry.clouds import DEFAULT_K, POINT_FILE_SUFFIXES, CloudError, check_normals, depth_to_points, estimate_normals, read_depth_image, read_point_file
 from ..geometry.shapes import Box, Capsule, Cylinder, Mesh, PointCloud, Shape, Sphere
 from .scene import Problem, Scene
 
@@ -50,7 +51,8 @@ VERSION = 1
 ROBOT_DIMS: dict[str, tuple[int, int]] = {"disc2d": (2, 2), "sphere3d": (3, 3), "sshape": (3, 7)}
 
 OBSTACLE_TYPES = ("box", "sphere", "capsule", "cylinder", "mesh", "points")
-POINT_FILE_SUFFIXES = (".npy", ".xyz", ".txt", ".csv")
+DEPTH_FILE_SUFFIXES = (".png", ".npy", ".tif", ".tiff")
+_POINTS_FIELDS = ("type", "path", "depth", "k", "viewpoint", "intrinsics", "camera_pose", "depth_scale", "stride")
 
 _TOP_FIELDS = ("format", "version", "dim", "bounds", "robot", "obstacles", "problems", "name")
 _PROBLEM_FIELDS = ("start", "goal", "tag")
@@ -283,11 +285,97 @@ class _Reader:
             rot = self.quaternion(entry["quaternion"], at("quaternion")) if "quaternion" in entry else np.eye(3)
             vertices, faces = self.mesh_file(path, at("path"))
             return Mesh(vertices=(vertices * scale) @ rot.T + pos, faces=faces, source=path)
-        # points
-        self.only(entry, ("type", "path"), where, "a point cloud")
-        path = self.file_path(need("path"), at("path"), POINT_FILE_SUFFIXES)
-        data = self.points_file(path, at("path"), dim)
-        return PointCloud(points=data[:, :dim], normals=data[:, dim:], source=path)
+        return self.points_obstacle(entry, where, dim)
+
+    def points_obstacle(self, entry: dict[str, Any], where: str, dim: int) -> PointCloud:
+        """A ``points`` obstacle: a point file or a depth image, normals read or estimated."""
+        at = lambda key: _join(where, key)
+        self.only(entry, _POINTS_FIELDS, where, "a point cloud")
+        has_path, has_depth = "path" in entry, "depth" in entry
+        if has_path == has_depth:
+            self.fail(where, "a points obstacle needs exactly one of 'path' (a point file) and 'depth' (a depth image)")
+        if not has_depth:
+            for key in ("intrinsics", "camera_pose", "depth_scale", "stride"):
+                if key in entry:
+                    self.fail(at(key), "only for a depth image ('depth')")
+        k = DEFAULT_K
+        if "k" in entry:
+            k = entry["k"]
+            if not isinstance(k, int) or isinstance(k, bool) or k < 3:
+                self.fail(at("k"), f"expected an integer of at least 3 (neighbours of the normal fit), got {_show(k)}")
+        viewpoint = self.vector(entry["viewpoint"], at("viewpoint"), dim) if "viewpoint" in entry else None
+
+        if has_depth:
+            if dim != 3:
+                self.fail(at("depth"), f"depth images need a 3D scene (dim is {dim})")
+            path = self.file_path(entry["depth"], at("depth"), DEPTH_FILE_SUFFIXES)
+            points, camera = self.depth_points(entry, path, where)
+            if viewpoint is None:
+                viewpoint = camera
+            normals = None
+            name = path.name
+        else:
+            path = self.file_path(entry["path"], at("path"), POINT_FILE_SUFFIXES)
+            try:
+                points, normals = read_point_file(path)
+            except CloudError as exc:
+                self.fail(at("path"), str(exc))
+            points, normals = self.fit_dimension(points, normals, path.name, at("path"), dim)
+            name = path.name
+        field_name = at("depth" if has_depth else "path")
+        try:
+            if normals is None:
+                if len(points) < dim + 1:
+                    self.fail(field_name, f"{name!r} holds {len(points)} points: too few to estimate normals (give normals in the file)")
+                normals = estimate_normals(points, k=k, viewpoint=viewpoint)
+            else:
+                normals = check_normals(normals, name)
+        except CloudError as exc:
+            self.fail(field_name, str(exc))
+        return PointCloud(points=points, normals=normals, source=path)
+
+    def fit_dimension(self, points: Array, normals: Array | None, name: str, where: str, dim: int) -> tuple[Array, Array | None]:
+        """Points (and normals) with ``dim`` columns: a 2D scene takes flat 3D clouds (z = 0)."""
+        c = points.shape[1]
+        if c == dim:
+            return points, normals
+        if dim == 2 and c == 3:
+            if np.any(points[:, 2] != 0.0):
+                self.fail(where, f"points file {name!r} holds 3D points (z is not 0 everywhere) but the scene is 2D; a 2D cloud has z = 0")
+            if normals is not None and np.any(np.abs(normals[:, 2]) > 1e-6 * np.maximum(np.linalg.norm(normals, axis=1), 1e-300)):
+                self.fail(where, f"points file {name!r}: normals of a 2D cloud must lie in the plane (normal z = 0)")
+            return points[:, :2], None if normals is None else normals[:, :2]
+        self.fail(where, f"points file {name!r} holds {c}D points but the scene is {dim}D")
+
+    def depth_points(self, entry: dict[str, Any], path: Path, where: str) -> tuple[Array, Array]:
+        """World points of a depth-image obstacle and the camera position."""
+        at = lambda key: _join(where, key)
+        intr = self.obj(self.get(entry, "intrinsics", where), at("intrinsics"))
+        self.only(intr, ("fx", "fy", "cx", "cy"), at("intrinsics"), "intrinsics")
+        fx, fy = (self.number(self.get(intr, key, at("intrinsics")), _join(at("intrinsics"), key), positive=True) for key in ("fx", "fy"))
+        cx, cy = (self.number(self.get(intr, key, at("intrinsics")), _join(at("intrinsics"), key)) for key in ("cx", "cy"))
+        pose = np.eye(4)
+        if "camera_pose" in entry:
+            cam = self.obj(entry["camera_pose"], at("camera_pose"))
+            self.only(cam, ("position", "quaternion"), at("camera_pose"), "a camera pose")
+            if "position" in cam:
+                pose[:3, 3] = self.vector(cam["position"], _join(at("camera_pose"), "position"), 3)
+            if "quaternion" in cam:
+                pose[:3, :3] = self.quaternion(cam["quaternion"], _join(at("camera_pose"), "quaternion"))
+        scale = self.number(entry["depth_scale"], at("depth_scale"), positive=True) if "depth_scale" in entry else 1.0
+        stride = entry.get("stride", 1)
+        if not isinstance(stride, int) or isinstance(stride, bool) or stride < 1:
+            self.fail(at("stride"), f"expected a positive integer, got {_show(stride)}")
+        try:
+            depth = read_depth_image(path)
+        except CloudError as exc:
+            self.fail(at("depth"), str(exc))
+        # every stride-th pixel, with the principal point moved to match
+        depth = depth[::stride, ::stride]
+        points = depth_to_points(depth, fx / stride, fy / stride, cx / stride, cy / stride, pose=pose, depth_scale=scale)
+        if len(points) == 0:
+            self.fail(at("depth"), f"depth image {path.name!r} has no pixel with a positive depth")
+        return points, pose[:3, 3].copy()
 
     def mesh_file(self, path: Path, where: str) -> tuple[Array, NDArray[np.int64]]:
         try:
@@ -305,28 +393,6 @@ class _Reader:
         if not np.all(np.isfinite(vertices)) or faces.min() < 0 or faces.max() >= len(vertices):
             self.fail(where, f"mesh {path.name!r} has invalid vertices or faces")
         return vertices, faces
-
-    def points_file(self, path: Path, where: str, dim: int) -> Array:
-        try:
-            if path.suffix.lower() == ".npy":
-                data = np.load(path, allow_pickle=False)
-            else:
-                delimiter = "," if path.suffix.lower() == ".csv" else None
-                data = np.loadtxt(path, dtype=np.float64, delimiter=delimiter, comments="#", ndmin=2)
-        except Exception as exc:
-            self.fail(where, f"cannot read points file {path.name!r}: {exc}")
-        if not np.issubdtype(np.asarray(data).dtype, np.number):
-            self.fail(where, f"points file {path.name!r} does not hold numbers (dtype {data.dtype})")
-        data = np.asarray(data, np.float64)
-        if data.ndim != 2 or data.shape[1] != 2 * dim or data.shape[0] == 0:
-            self.fail(
-                where,
-                f"points file {path.name!r}: expected an array (P, {2 * dim}) of {dim} coordinates "
-                f"and {dim} normal components per row, got shape {data.shape}",
-            )
-        if not np.all(np.isfinite(data)):
-            self.fail(where, f"points file {path.name!r} contains NaN or infinite values")
-        return data
 
     # ------------------------------------------------------------------ problems
     def problems(self, entries: list[Any], scene: Scene, robot: str | None) -> list[Problem]:
@@ -393,6 +459,49 @@ def load_scene(path: str | os.PathLike[str]) -> SceneFile:
     except RecursionError:
         raise SceneFormatError(name, "", "invalid JSON: nested too deeply") from None
     return _Reader(name, path.parent).document(doc)
+
+
+def load_points_scene(
+    path: str | os.PathLike[str],
+    dim: int | None = None,
+    bounds: tuple[Sequence[float], Sequence[float]] | None = None,
+    pad: float = 0.1,
+    k: int = DEFAULT_K,
+    viewpoint: Sequence[float] | None = None,
+) -> Scene:
+    """A scene made of one point file (``.ply``, ``.pcd``, ``.npy``, ``.xyz``, ...), as a
+    ``points`` obstacle of a scene file would read it (normals estimated when the file has
+    none).
+
+    ``dim`` defaults to 2 for a cloud of 2 columns or a flat one (z = 0 everywhere), else
+    3. ``bounds`` is ``(low, high)``; without it the cloud's bounding box is grown by
+    ``pad`` times its largest side on every side. Errors are :class:`SceneFormatError`
+    naming the file.
+    """
+    path = Path(path)
+    name = str(path)
+    reader = _Reader(name, path.parent)
+    if not path.is_file():
+        raise SceneFormatError(name, "", "file not found")
+    if dim is None:
+        try:
+            points, _ = read_point_file(path)
+        except CloudError as exc:
+            raise SceneFormatError(name, "", str(exc)) from None
+        dim = 2 if points.shape[1] == 2 or (points.shape[1] == 3 and np.all(points[:, 2] == 0.0)) else 3
+    entry: dict[str, Any] = {"type": "points", "path": str(path.resolve()), "k": int(k)}
+    if viewpoint is not None:
+        entry["viewpoint"] = [float(x) for x in viewpoint]
+    cloud = reader.points_obstacle(entry, "", dim)
+    if bounds is None:
+        lo, hi = cloud.points.min(0), cloud.points.max(0)
+        margin = pad * max(float(np.max(hi - lo)), 1e-3)
+        low, high = lo - margin, hi + margin
+    else:
+        low, high = (np.asarray(b, np.float64).reshape(-1) for b in bounds)
+        if low.shape != (dim,) or high.shape != (dim,) or np.any(high <= low):
+            raise SceneFormatError(name, "bounds", f"expected {dim} numbers low and high with low < high, got {low.tolist()} and {high.tolist()}")
+    return Scene(obstacles=[cloud], low=low, high=high, name=path.stem)
 
 
 # ============================================================================ writing
