@@ -2,9 +2,9 @@
 finishes, so a long run can be split over processes and stopped at any time), and a
 summary of such files.
 
-    python benchmarks/birrt_problems.py run --env slot --robot sshape --max-nodes 50000 \\
+    python scripts/birrt_problems.py run --env slot --robot sshape --max-nodes 50000 \\
         --start 0 --stop 100 --every 2 --out runs/slot_even.jsonl
-    python benchmarks/birrt_problems.py summary runs/slot_even.jsonl runs/slot_odd.jsonl
+    python scripts/birrt_problems.py summary runs/slot_even.jsonl runs/slot_odd.jsonl
 
 Problem ``i`` is test problem ``i`` (start and goal seed 0) planned by a fresh
 ``BiRRT(seed=i)``, so results do not depend on how the problems are split; success is the

@@ -1,10 +1,10 @@
 """Policies on fixed problems under chosen variants: checkpoints, their weight average,
 the rule at the workspace bounds, observation seeds.
 
-    python benchmarks/eval_policy_variants.py                       # the shipped policy
-    python benchmarks/eval_policy_variants.py --bounds clip stop    # both bounds rules
-    python benchmarks/eval_policy_variants.py --checkpoints a.pt b.pt c.pt --average
-    python benchmarks/eval_policy_variants.py --splits val --val-episodes 2000 --problem-seeds 0 1 2 3
+    python scripts/eval_policy_variants.py                       # the shipped policy
+    python scripts/eval_policy_variants.py --bounds clip stop    # both bounds rules
+    python scripts/eval_policy_variants.py --checkpoints a.pt b.pt c.pt --average
+    python scripts/eval_policy_variants.py --splits val --val-episodes 2000 --problem-seeds 0 1 2 3
 
 Prints one row per (policy, bounds rule, split, problem seed, observation seed): success
 (paths re-checked by the evaluator), mean nodes, failing problem indices; with several rows

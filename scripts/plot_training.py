@@ -1,6 +1,6 @@
 """Plot validation success against wall time (and env steps) for training runs.
 
-    python benchmarks/plot_training.py runs/a/metrics.csv runs/b/metrics.csv -o docs/img/training.png \
+    python scripts/plot_training.py runs/a/metrics.csv runs/b/metrics.csv -o docs/img/training.png \
         --labels "SAC+HER from scratch" "BC then SAC+HER"
 """
 
