@@ -309,9 +309,9 @@ def _demo_figures_3d(args: argparse.Namespace, robot: Any, shown: list[Any], pol
     from .viz.plot3d import render_grid_3d, render_rollout_gif
 
     shown, policy, birrt = shown[:4], policy[:4], birrt[:4]
-    name = lambda p: p.tag.split("/", 2)[-1]  # noqa: E731
-    titles = [f"policy  {name(p)}: {r.nodes} steps" for p, r in zip(shown, policy)]
-    titles += [f"Bi-RRT  {name(p)}: {r.nodes} nodes" for p, r in zip(shown, birrt)]
+    names = [f"test problem {p.tag.split('/')[2]}" if p.tag.count("/") >= 2 else p.tag for p in shown]
+    titles = [f"policy, {n}: {r.nodes} steps" for n, r in zip(names, policy)]
+    titles += [f"Bi-RRT, {n}: {r.nodes} nodes" for n, r in zip(names, birrt)]
     paths = [r.path for r in policy] + [r.path if r.success else None for r in birrt]
     render_grid_3d(shown + shown, robot, paths, args.output, cols=len(shown), titles=titles)
     print(f"wrote {args.output} (policy above, Bi-RRT below)")
