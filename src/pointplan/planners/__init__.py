@@ -1,4 +1,6 @@
-"""Planners: Bi-RRT (RRT-Connect), the straight line, and a registry to build them by name."""
+"""Planners: Bi-RRT (RRT-Connect), the straight line, the learned policy, the hybrid
+(policy, then Bi-RRT), OMPL's planners (``ompl:NAME``, optional), and a registry to build
+them by name."""
 
 from __future__ import annotations
 
@@ -38,12 +40,19 @@ def register_planner(name: str, factory: Callable[..., Planner]) -> None:
 
 
 def make_planner(name: str, robot: Robot, **kw: Any) -> Planner:
-    """A planner by name (``birrt``, ``straight``, ``policy`` with ``checkpoint=``, or any
-    registered one)."""
+    """A planner by name (``birrt``, ``straight``, ``policy`` with ``checkpoint=``,
+    ``hybrid``, ``ompl:NAME`` for any OMPL geometric planner such as ``ompl:RRTConnect``,
+    or any registered one). ``ompl:`` planners raise ``ImportError`` naming
+    ``pip install 'pointplan[ompl]'`` when the optional ``ompl`` package is missing."""
+    key = name.strip().lower()
+    if key.startswith("ompl:"):
+        from .ompl import make_ompl_planner
+
+        return make_ompl_planner(robot, name.strip()[5:], **kw)
     try:
-        factory = PLANNERS[name.lower()]
+        factory = PLANNERS[key]
     except KeyError:
-        raise ValueError(f"unknown planner {name!r}; known: {', '.join(sorted(PLANNERS))}") from None
+        raise ValueError(f"unknown planner {name!r}; known: {', '.join(sorted(PLANNERS))}, ompl:NAME (e.g. ompl:RRTConnect)") from None
     return factory(robot, **kw)
 
 
