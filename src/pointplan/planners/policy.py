@@ -3,23 +3,39 @@
 ``rollout_batch`` plays many problems at once through the batched environment core
 (deterministic actions); ``PolicyPlanner`` wraps a trained :class:`~pointplan.models.policy.Policy`
 behind the :class:`Planner` protocol. Nodes are policy steps; collision checks are the
-sub-configurations ``q_free`` checked.
+sub-configurations ``q_free`` checked, plus those of the final connection to the goal.
+
+``PolicyPlanner.plan`` (one problem, as a user calls it) does not go through the batched
+core: it steps one robot with the environment's own pieces (the observer's draws, the
+policy, ``q_free``), with the network in numpy when it is a PointNet
+(:class:`~pointplan.models.policy.NumpyPointNetActor`) and otherwise PyTorch on one thread.
+Its rollouts are those of ``rollout_batch`` with one problem.
+
+The environment stops a rollout anywhere within ``goal_tolerance`` of the goal. The
+planner then tries the last step to the goal itself (the geodesic from the policy's last
+configuration, checked like a Bi-RRT edge): when it is free the path ends at the goal
+(``info["end"] == "goal"``), otherwise where the policy stopped (``"near-goal"``). A
+rollout that does not get there ends with ``"horizon"`` (or ``"stalled"``, ``"crushed"``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from ..envs.core import BatchedCore, EnvConfig
+from ..envs.core import BatchedCore, EnvConfig, q_free
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario
 from ..scenes.scene import Problem, Scene
 from .base import PlanResult
+from ..observers.base import PointSetObserver
+from .edges import edge_free
 
 ActFn = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
@@ -37,9 +53,78 @@ class _GivenProblems(Scenario):
         raise RuntimeError("rollouts play given problems only")
 
 
-def rollout_batch(act: ActFn, robot: Robot, env: EnvConfig, problems: Sequence[Problem], horizon: int, seed: int = 0, chunk: int = 100) -> list[PlanResult]:
+def _free_move_end(robot: Robot, q: np.ndarray, twist: np.ndarray, low: np.ndarray, high: np.ndarray, clip_target: bool) -> np.ndarray:
+    """Where ``q_free`` ends a move that nothing stops: ``q exp(twist)``, or with
+    ``clip_target`` that end clipped into the bounds (reached along ``log(q, clipped)``)."""
+    end = robot.integrate(q[None], twist[None])
+    if clip_target:
+        clipped = robot.clip(end, low, high)
+        if np.any(clipped != end):
+            end = robot.integrate(q[None], robot.log(q[None], clipped))
+    return end[0]
+
+
+def connect_to_goal(robot: Robot, problem: Problem, result: PlanResult, resolution: float = 0.01, t: int | None = None) -> PlanResult:
+    """End a successful rollout at the goal itself when the geodesic from its last
+    configuration to the goal is free (checked like a Bi-RRT edge, at ``resolution``; in a
+    scene whose obstacles move, against the obstacles at time ``t``, the step the
+    connection would take). The checks are added to ``collision_checks``; the goal is not a
+    node. Sets ``info["end"]`` (``goal``, ``near-goal``, or ``horizon`` for a failure that
+    does not already say why) and ``info["goal_connection"]``."""
+    t0 = time.perf_counter()
+    info = result.info
+    if not result.success or len(result.path) == 0:
+        info.setdefault("end", "horizon")
+        info["goal_connection"] = None
+        return result
+    last = result.path[-1]
+    if float(robot.distance(last, problem.goal)) <= 0.0:
+        info["end"], info["goal_connection"] = "goal", "free"
+        return result
+    scene = problem.scene
+    world = scene.world_at(len(result.path) if t is None else t) if scene.dynamic else scene.world
+    ok, checks = edge_free(robot, world, last, problem.goal, resolution, scene.low, scene.high)
+    result.collision_checks += checks
+    if ok:
+        result.path = np.concatenate([result.path, np.asarray(problem.goal, np.float64)[None]])
+    info["end"] = "goal" if ok else "near-goal"
+    info["goal_connection"] = "free" if ok else "blocked"
+    result.time_s += time.perf_counter() - t0
+    return result
+
+
+@contextlib.contextmanager
+def torch_threads(n: int) -> Iterator[None]:
+    """Run PyTorch on ``n`` threads inside the block (batch-1 inference on more threads
+    only oversubscribes the cores), and restore the previous count after."""
+    try:
+        import torch
+    except ImportError:  # pragma: no cover
+        yield
+        return
+    before = torch.get_num_threads()
+    if before != n:
+        torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        if before != n:
+            torch.set_num_threads(before)
+
+
+def rollout_batch(
+    act: ActFn,
+    robot: Robot,
+    env: EnvConfig,
+    problems: Sequence[Problem],
+    horizon: int,
+    seed: int = 0,
+    chunk: int = 100,
+    connect_goal: bool = False,
+) -> list[PlanResult]:
     """Roll ``act(obs, q, goal) -> actions`` out on every problem, ``chunk`` at a time.
-    The time of a chunk is shared equally by its problems."""
+    The time of a chunk is shared equally by its problems. With ``connect_goal`` each
+    successful path ends at the goal when it can (:func:`connect_to_goal`)."""
     results: list[PlanResult] = []
     env = replace(env, horizon=horizon)
     for c0 in range(0, len(problems), chunk):
@@ -55,6 +140,7 @@ def rollout_batch(act: ActFn, robot: Robot, env: EnvConfig, problems: Sequence[P
         checks = np.zeros(n, np.int64)
         active = np.ones(n, bool)
         success = np.zeros(n, bool)
+        crushed = np.zeros(n, bool)
         for t in range(horizon):
             obs = core.observe(rng)["observation"]  # (at each problem's own time step)
             a = np.asarray(act(obs, core.q.copy(), core.goal.copy()), np.float32)
@@ -64,22 +150,44 @@ def rollout_batch(act: ActFn, robot: Robot, env: EnvConfig, problems: Sequence[P
             length += active
             checks += np.where(active, info["collision_checks"], 0)
             success |= term & active
+            crushed |= info["crushed"] & active
             active &= ~(term | info["crushed"])  # a moving obstacle that hits the robot ends it
             if not active.any():
                 break
         dt = (time.perf_counter() - t0) / n
         for i in range(n):
             k = int(length[i])
-            results.append(PlanResult(path=paths[:k, i].copy(), success=bool(success[i]), nodes=k - 1, collision_checks=int(checks[i]), time_s=dt))
+            res = PlanResult(path=paths[:k, i].copy(), success=bool(success[i]), nodes=k - 1, collision_checks=int(checks[i]), time_s=dt)
+            if crushed[i]:
+                res.info["end"] = "crushed"
+            if connect_goal:
+                res = connect_to_goal(robot, probs[i], res, t=k)
+            results.append(res)
     return results
 
 
 class PolicyPlanner:
-    """Plan by rolling out a trained policy (deterministic mean actions)."""
+    """Plan by rolling out a trained policy (deterministic mean actions).
+
+    ``stall_steps``: stop a rollout early when ``stall_steps`` steps in a row bring the robot
+    no closer to the goal than it has been (``info["end"] == "stalled"``; off by default,
+    the hybrid planner uses it). ``connect_goal``: end successful paths at the goal when
+    the last connection is free (default). ``info["time_split"]`` of a ``plan`` result has
+    the seconds spent observing, in the network and in the motion check (``q_free``).
+    """
 
     name = "policy"
 
-    def __init__(self, policy: object, robot: Robot | None = None, horizon: int | None = None, env: EnvConfig | None = None) -> None:
+    def __init__(
+        self,
+        policy: object,
+        robot: Robot | None = None,
+        horizon: int | None = None,
+        env: EnvConfig | None = None,
+        stall_steps: int | None = None,
+        connect_goal: bool = True,
+        seed: int = 0,
+    ) -> None:
         from ..models.policy import Policy
 
         if isinstance(policy, (str, Path)):
@@ -93,10 +201,180 @@ class PolicyPlanner:
         if self.env.observation != policy.observation:
             raise ValueError(f"the policy was trained on {policy.observation!r} observations, not {self.env.observation!r}")
         self.horizon = int(horizon or policy.meta.get("horizon") or 50)
+        self.stall_steps = None if stall_steps is None else int(stall_steps)
+        self.connect_goal = bool(connect_goal)
+        self.seed = int(seed)
+        #: the network as numpy arrays (weights as of now), or None: PyTorch on one thread
+        self.fast = policy.fast_actor()
+        self._observer: Any = None
+        self._stream_rng: np.random.Generator | None = None
+        self._stream = np.empty(0)
 
     def plan(self, problem: Problem) -> PlanResult:
-        return rollout_batch(self.policy, self.robot, self.env, [problem], self.horizon)[0]
+        if problem.scene.dynamic:
+            return self._plan_batched(problem)
+        if self._observer is None:
+            probe = BatchedCore(_GivenProblems(self.robot, self.horizon), 1, replace(self.env, horizon=self.horizon))
+            self._observer = probe.observer
+        if not isinstance(self._observer, PointSetObserver):
+            return self._plan_batched(problem)
+        return self._rollout_one(problem)
+
+    def _plan_batched(self, problem: Problem) -> PlanResult:
+        with torch_threads(1):
+            res = rollout_batch(self.policy, self.robot, self.env, [problem], self.horizon, self.seed, connect_goal=self.connect_goal)[0]
+        return res
+
+    def _act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        from ..models.inputs import goal_input, obs_input
+
+        if self.fast is not None:
+            return self.fast(obs_input(self.robot, obs[None])[0], goal_input(self.robot, q, goal))
+        return self.policy(obs[None], q[None], goal[None])[0]
+
+    def _uniforms(self, k: int) -> np.ndarray:
+        """The first ``k`` numbers of the stream ``rollout_batch`` draws its observations
+        from (seed ``(seed, 0)``): the same for every problem, so drawn once and kept."""
+        if self._stream_rng is None:
+            self._stream_rng = np.random.default_rng(np.random.SeedSequence([self.seed, 0]))
+            self._stream = np.empty(0)
+        if len(self._stream) < k:
+            more = max(k - len(self._stream), 8192)
+            self._stream = np.concatenate([self._stream, self._stream_rng.random(more)])
+        return self._stream
+
+    def _lean_inputs(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
+        """For a robot without orientation seeing points: ``(q, goal, u) -> (obs_in,
+        goal_in)``, the network inputs of ``observe_one(q, u=u)`` through ``obs_input``
+        and ``goal_input`` in a few numpy calls, bit for bit (the body frame is a
+        translation). ``None`` for other robots and observers."""
+        robot, observer = self.robot, self._observer
+        if robot.config_dim != robot.dim or type(observer).observe_one is not PointSetObserver.observe_one:
+            return None
+        pts, nrm = observer.points_one()
+        count, n, d = len(pts), observer.n_points, robot.dim
+        if count == 0:
+            return None
+        m = max(count, 1)
+        normals = nrm.astype(np.float32) if observer.with_normals else None
+        s32 = np.float32(robot.action_scale[0])
+        scale = robot.action_scale
+        width = observer.features
+
+        def inputs(q: np.ndarray, goal: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            idx = np.argsort(u[:m])[:n]
+            if count < n:
+                idx = np.concatenate([idx, (u[m + count : m + n] * count).astype(np.int64)])
+            x = np.empty((n, width), np.float32)
+            x[:, :d] = pts[idx] - q  # float64 difference, stored as float32 (as the observer does)
+            x[:, :d] /= s32
+            if normals is not None:
+                x[:, d:] = normals[idx]
+            return x, ((goal - q) / scale).astype(np.float32)
+
+        return inputs
+
+    def _rollout_one(self, problem: Problem) -> PlanResult:
+        """One robot stepped as the environment steps it: the same observation draws as
+        ``rollout_batch`` with this one problem and the same ``q_free``, without the batch.
+
+        The motion checks are batched along the rollout: the policy runs ahead assuming
+        each move ends at its (bounds-clipped) target, as a free move does; then one
+        ``q_free`` call checks all those moves. Up to the first move that ``q_free`` ends
+        elsewhere (a collision, a bound) the rollout is exactly the sequential one; from
+        there it continues from where ``q_free`` put the robot, with the same draws. So
+        the result is the sequential rollout's, at one motion-check call per run ahead
+        instead of one per step."""
+        t0 = time.perf_counter()
+        robot, env, scene = self.robot, self.env, problem.scene
+        if problem.start.shape != (robot.config_dim,):
+            raise ValueError(f"problem {problem.tag or ''} does not fit robot {robot.name}")
+        observer = self._observer
+        observer.set_scene(0, scene)
+        per_step = observer.draws_one()
+        lean = self._lean_inputs() if self.fast is not None else None
+        world, low1, high1 = scene.world, scene.low[None], scene.high[None]
+        goal = np.asarray(problem.goal, np.float64)
+        clip_target = env.bounds == "clip"
+        tol, horizon, stall = env.goal_tolerance, self.horizon, self.stall_steps
+        q = np.asarray(problem.start, np.float64).copy()
+        path = [q]
+        checks = 0
+        success = False
+        end = "horizon"
+        best, since_best = float(robot.distance(q, goal)), 0
+        t_obs = t_net = t_motion = 0.0
+        t = 0  # steps taken (verified)
+        ctx = torch_threads(1) if self.fast is None else contextlib.nullcontext()
+        with ctx:
+            while t < horizon and not success and end == "horizon":
+                # run ahead from (q, t), every move assumed free
+                qs, twists, dists = [q], [], []
+                qq, sb, ss = q, best, since_best
+                for s in range(t, horizon):
+                    u = self._uniforms((s + 1) * per_step)[s * per_step : (s + 1) * per_step]
+                    ta = time.perf_counter()
+                    if lean is not None:
+                        x, g = lean(qq, goal, u)
+                        tb = time.perf_counter()
+                        a = self.fast(x, g)  # type: ignore[misc]
+                    else:
+                        obs = observer.observe_one(qq, u=u)
+                        tb = time.perf_counter()
+                        a = self._act(obs, qq, goal)
+                    tc = time.perf_counter()
+                    tw = np.clip(np.asarray(a, np.float64), -1.0, 1.0) * robot.action_scale
+                    qq = _free_move_end(robot, qq, tw, scene.low, scene.high, clip_target)
+                    t_obs += tb - ta
+                    t_net += tc - tb
+                    t_motion += time.perf_counter() - tc
+                    twists.append(tw)
+                    qs.append(qq)
+                    d = float(robot.distance(qq, goal))
+                    dists.append(d)
+                    if d < tol:
+                        break
+                    if d < sb - 1e-9:
+                        sb, ss = d, 0
+                    else:
+                        ss += 1
+                        if stall is not None and ss >= stall:
+                            break
+                # check every move of the run in one call; keep what agrees
+                tc = time.perf_counter()
+                k = len(twists)
+                new_q, collided, n = q_free(robot, world, np.stack(qs[:-1]), np.stack(twists), np.repeat(low1, k, 0), np.repeat(high1, k, 0), env.substep, clip_target=clip_target)
+                t_motion += time.perf_counter() - tc
+                for j in range(k):
+                    q = new_q[j]
+                    path.append(q)
+                    checks += int(n[j])
+                    t += 1
+                    agrees = not collided[j] and np.array_equal(q, qs[j + 1])
+                    d = dists[j] if agrees else float(robot.distance(q, goal))
+                    if d < tol and not collided[j]:
+                        success = True
+                        break
+                    if d < best - 1e-9:
+                        best, since_best = d, 0
+                    else:
+                        since_best += 1
+                        if stall is not None and since_best >= stall:
+                            end = "stalled"
+                            break
+                    if not agrees:
+                        break  # the run ahead went elsewhere from here: run again from q
+        steps = len(path) - 1
+        res = PlanResult(path=np.stack(path), success=success, nodes=steps, collision_checks=checks, time_s=time.perf_counter() - t0)
+        res.info["time_split"] = {"observe": t_obs, "network": t_net, "motion": t_motion, "steps": steps}
+        if not success:
+            res.info["end"] = end
+        if self.connect_goal:
+            res = connect_to_goal(robot, problem, res)
+        else:
+            res.info.setdefault("end", "near-goal" if success else end)
+        return res
 
     def plan_many(self, problems: Sequence[Problem]) -> list[PlanResult]:
         """All problems at once (much faster than one by one)."""
-        return rollout_batch(self.policy, self.robot, self.env, problems, self.horizon)
+        return rollout_batch(self.policy, self.robot, self.env, problems, self.horizon, self.seed, connect_goal=self.connect_goal)
