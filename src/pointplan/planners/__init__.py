@@ -34,6 +34,26 @@ def _policy_factory(robot: Robot, checkpoint: str | None = None, observation: st
 PLANNERS["policy"] = _policy_factory
 
 
+def _hybrid_factory(
+    robot: Robot,
+    checkpoint: str | None = None,
+    observation: str | None = None,
+    max_nodes: int = 10000,
+    seed: int = 0,
+    stall_steps: int | None = 10,
+    **kw: Any,
+) -> Planner:
+    """The policy (``checkpoint`` or the shipped one), then Bi-RRT (``max_nodes``,
+    ``seed``, other keywords) from where it failed or stalled."""
+    from .hybrid import HybridPlanner
+
+    policy = _policy_factory(robot, checkpoint=checkpoint, observation=observation, stall_steps=stall_steps)
+    return HybridPlanner(policy, BiRRT(robot, max_nodes=max_nodes, seed=seed, **kw))  # type: ignore[arg-type]
+
+
+PLANNERS["hybrid"] = _hybrid_factory
+
+
 def register_planner(name: str, factory: Callable[..., Planner]) -> None:
     """Make ``factory(robot, **kw)`` available to :func:`make_planner` as ``name``."""
     PLANNERS[name.lower()] = factory
