@@ -30,8 +30,9 @@ def test_hybrid_solves_what_the_policy_fails(hybrid: HybridPlanner, index: int) 
     assert check_path(robot, problem, res.path)
     assert np.array_equal(res.path[0], problem.start) and np.array_equal(res.path[-1], problem.goal)
     assert res.nodes == res.info["policy_steps"] + res.info["birrt_nodes"]
-    # the policy stalled before its horizon, so fewer steps than the policy alone
-    assert res.info["policy_steps"] <= alone.nodes
+    # the policy dithers in place on both: stopped early, so fewer steps than alone
+    assert res.info["policy_end"] == "stalled"
+    assert res.info["policy_steps"] < alone.nodes
 
 
 def test_hybrid_keeps_the_policy_path_when_it_reaches_the_goal(hybrid: HybridPlanner) -> None:

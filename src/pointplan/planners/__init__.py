@@ -41,13 +41,15 @@ def _hybrid_factory(
     max_nodes: int = 10000,
     seed: int = 0,
     stall_steps: int | None = 10,
+    stall_distance: float = 0.035,
     **kw: Any,
 ) -> Planner:
-    """The policy (``checkpoint`` or the shipped one), then Bi-RRT (``max_nodes``,
-    ``seed``, other keywords) from where it failed or stalled."""
+    """The policy (``checkpoint`` or the shipped one), stopped when it stalls (moved less
+    than ``stall_distance`` over ``stall_steps`` steps) or at its horizon, then Bi-RRT
+    (``max_nodes``, ``seed``, other keywords) from its configuration closest to the goal."""
     from .hybrid import HybridPlanner
 
-    policy = _policy_factory(robot, checkpoint=checkpoint, observation=observation, stall_steps=stall_steps)
+    policy = _policy_factory(robot, checkpoint=checkpoint, observation=observation, stall_steps=stall_steps, stall_distance=stall_distance)
     return HybridPlanner(policy, BiRRT(robot, max_nodes=max_nodes, seed=seed, **kw))  # type: ignore[arg-type]
 
 

@@ -2,8 +2,9 @@
 
 ``HybridPlanner`` rolls the policy out (batch 1, :class:`~pointplan.planners.policy.PolicyPlanner`)
 and keeps its path when it ends at the goal. Otherwise, when the horizon ends, when the
-policy stalls (``stall_steps`` steps in a row without getting closer to the goal than it
-has been), or when the last connection to the goal is blocked, Bi-RRT plans from the last
+policy stalls (its last ``stall_steps`` steps took it less than ``stall_distance`` from
+where it was: 10 steps and 0.035 by default), or when the last connection to the goal is
+blocked, Bi-RRT plans from the last
 good configuration of the rollout to the goal, and the two pieces make one path:
 
 - after a stall or the horizon, the last good configuration is the one closest to the

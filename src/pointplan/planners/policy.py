@@ -169,11 +169,13 @@ def rollout_batch(
 class PolicyPlanner:
     """Plan by rolling out a trained policy (deterministic mean actions).
 
-    ``stall_steps``: stop a rollout early when ``stall_steps`` steps in a row bring the robot
-    no closer to the goal than it has been (``info["end"] == "stalled"``; off by default,
-    the hybrid planner uses it). ``connect_goal``: end successful paths at the goal when
-    the last connection is free (default). ``info["time_split"]`` of a ``plan`` result has
-    the seconds spent observing, in the network and in the motion check (``q_free``).
+    ``stall_steps``, ``stall_distance``: stop a rollout early when the robot's last
+    ``stall_steps`` steps took it less than ``stall_distance`` from where it was (it
+    dithers in place; ``info["end"] == "stalled"``). Off by default; the hybrid planner
+    uses 10 steps and half a step (0.035), under which none of 1,000 validation rollouts of
+    the shipped policy that succeed would have stopped. ``connect_goal``: end successful
+    paths at the goal when the last edge is free (default). ``info["time_split"]`` of a
+    ``plan`` result has the seconds spent observing, in the network and in motion checks.
     """
 
     name = "policy"
@@ -185,6 +187,7 @@ class PolicyPlanner:
         horizon: int | None = None,
         env: EnvConfig | None = None,
         stall_steps: int | None = None,
+        stall_distance: float = 0.035,
         connect_goal: bool = True,
         seed: int = 0,
     ) -> None:
@@ -202,6 +205,7 @@ class PolicyPlanner:
             raise ValueError(f"the policy was trained on {policy.observation!r} observations, not {self.env.observation!r}")
         self.horizon = int(horizon or policy.meta.get("horizon") or 50)
         self.stall_steps = None if stall_steps is None else int(stall_steps)
+        self.stall_distance = float(stall_distance)
         self.connect_goal = bool(connect_goal)
         self.seed = int(seed)
         #: the network as numpy arrays (weights as of now), or None: PyTorch on one thread
@@ -302,7 +306,7 @@ class PolicyPlanner:
         checks = 0
         success = False
         end = "horizon"
-        best, since_best = float(robot.distance(q, goal)), 0
+        stall_r = self.stall_distance
         t_obs = t_net = t_motion = 0.0
         t = 0  # steps taken (verified)
         ctx = torch_threads(1) if self.fast is None else contextlib.nullcontext()
@@ -310,7 +314,7 @@ class PolicyPlanner:
             while t < horizon and not success and end == "horizon":
                 # run ahead from (q, t), every move assumed free
                 qs, twists, dists = [q], [], []
-                qq, sb, ss = q, best, since_best
+                qq = q
                 for s in range(t, horizon):
                     u = self._uniforms((s + 1) * per_step)[s * per_step : (s + 1) * per_step]
                     ta = time.perf_counter()
@@ -334,11 +338,9 @@ class PolicyPlanner:
                     dists.append(d)
                     if d < tol:
                         break
-                    if d < sb - 1e-9:
-                        sb, ss = d, 0
-                    else:
-                        ss += 1
-                        if stall is not None and ss >= stall:
+                    if stall is not None and s + 1 >= stall:
+                        back = s + 1 - stall  # the step ``stall`` steps before this one
+                        if float(robot.distance(qq, qs[back - t] if back >= t else path[back])) < stall_r:
                             break
                 # check every move of the run in one call; keep what agrees
                 tc = time.perf_counter()
@@ -355,13 +357,9 @@ class PolicyPlanner:
                     if d < tol and not collided[j]:
                         success = True
                         break
-                    if d < best - 1e-9:
-                        best, since_best = d, 0
-                    else:
-                        since_best += 1
-                        if stall is not None and since_best >= stall:
-                            end = "stalled"
-                            break
+                    if stall is not None and t >= stall and float(robot.distance(q, path[t - stall])) < stall_r:
+                        end = "stalled"
+                        break
                     if not agrees:
                         break  # the run ahead went elsewhere from here: run again from q
         steps = len(path) - 1
