@@ -126,6 +126,13 @@ class NumpyPointNetActor:
         w, b = self.inp
         h = obs_in @ w
         h += b
+        return self.from_first_layer(h, goal_in)
+
+    def from_first_layer(self, h: np.ndarray, goal_in: np.ndarray) -> np.ndarray:
+        """The action from the first layer's pre-activations ``obs_in @ W + b``
+        (``(..., N, width)`` float32, overwritten): a caller that can get them cheaper
+        (a translating robot: a table per scene minus one row per step) skips the input
+        layer."""
         h = _elu(h)
         last = len(self.hidden) - 1
         pooled = None
@@ -136,10 +143,10 @@ class NumpyPointNetActor:
                 y += h
                 h = _elu(y)
             else:  # max(y + b) = max(y) + b exactly (rounding is monotonic)
-                pooled = y.max(axis=-2)
+                pooled = np.maximum.reduce(y, axis=-2)
                 pooled += b
         if pooled is None:
-            pooled = h.max(axis=-2)
+            pooled = np.maximum.reduce(h, axis=-2)
         z = np.concatenate([pooled, np.asarray(goal_in, np.float32)], -1)
         for i, (w, b) in enumerate(self.head):
             z = z @ w

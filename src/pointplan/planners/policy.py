@@ -31,6 +31,7 @@ import numpy as np
 
 from ..envs.core import BatchedCore, EnvConfig, q_free
 from ..robots.base import Robot
+from ..robots.point import Disc2D, Sphere3D
 from ..scenes.scenarios import Scenario
 from ..scenes.scene import Problem, Scene
 from .base import PlanResult
@@ -56,6 +57,13 @@ class _GivenProblems(Scenario):
 def _free_move_end(robot: Robot, q: np.ndarray, twist: np.ndarray, low: np.ndarray, high: np.ndarray, clip_target: bool) -> np.ndarray:
     """Where ``q_free`` ends a move that nothing stops: ``q exp(twist)``, or with
     ``clip_target`` that end clipped into the bounds (reached along ``log(q, clipped)``)."""
+    if isinstance(robot, (Disc2D, Sphere3D)):  # a translating ball: the same arithmetic, fewer calls
+        end1 = q + twist
+        if clip_target:
+            clipped1 = np.clip(end1, low, high)
+            if (clipped1 != end1).any():
+                return q + (clipped1 - q)
+        return end1
     end = robot.integrate(q[None], twist[None])
     if clip_target:
         clipped = robot.clip(end, low, high)
@@ -247,36 +255,39 @@ class PolicyPlanner:
             self._stream = np.concatenate([self._stream, self._stream_rng.random(more)])
         return self._stream
 
-    def _lean_inputs(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
-        """For a robot without orientation seeing points: ``(q, goal, u) -> (obs_in,
-        goal_in)``, the network inputs of ``observe_one(q, u=u)`` through ``obs_input``
-        and ``goal_input`` in a few numpy calls, bit for bit (the body frame is a
-        translation). ``None`` for other robots and observers."""
-        robot, observer = self.robot, self._observer
-        if robot.config_dim != robot.dim or type(observer).observe_one is not PointSetObserver.observe_one:
+    def _lean_step(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None:
+        """For a robot that only translates, seeing points, with the numpy network:
+        ``(q, goal, u) -> action`` for the observation ``observe_one(q, u=u)``, without
+        building the observation. The body frame is a translation, so the input layer's
+        pre-activations are a per-scene table (``points / scale @ W + normals @ W + b``)
+        minus one row (``q / scale @ W``), gathered for the drawn points: the same
+        arithmetic up to float32 round-off (about 1e-7). ``None`` otherwise."""
+        robot, observer, fast = self.robot, self._observer, self.fast
+        if fast is None or not isinstance(robot, (Disc2D, Sphere3D)) or type(observer).observe_one is not PointSetObserver.observe_one:
             return None
         pts, nrm = observer.points_one()
         count, n, d = len(pts), observer.n_points, robot.dim
         if count == 0:
             return None
         m = max(count, 1)
-        normals = nrm.astype(np.float32) if observer.with_normals else None
         s32 = np.float32(robot.action_scale[0])
+        w, b = fast.inp
+        x = (pts / robot.action_scale[0]).astype(np.float32)
+        if observer.with_normals:
+            x = np.concatenate([x, nrm.astype(np.float32)], 1)
+        table = x @ w + b  # (count, width)
+        w_pos = w[:d]
         scale = robot.action_scale
-        width = observer.features
 
-        def inputs(q: np.ndarray, goal: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        def step(q: np.ndarray, goal: np.ndarray, u: np.ndarray) -> np.ndarray:
             idx = np.argsort(u[:m])[:n]
             if count < n:
                 idx = np.concatenate([idx, (u[m + count : m + n] * count).astype(np.int64)])
-            x = np.empty((n, width), np.float32)
-            x[:, :d] = pts[idx] - q  # float64 difference, stored as float32 (as the observer does)
-            x[:, :d] /= s32
-            if normals is not None:
-                x[:, d:] = normals[idx]
-            return x, ((goal - q) / scale).astype(np.float32)
+            h = table[idx]
+            h -= (q / s32).astype(np.float32) @ w_pos
+            return fast.from_first_layer(h, ((goal - q) / scale).astype(np.float32))
 
-        return inputs
+        return step
 
     def _rollout_one(self, problem: Problem) -> PlanResult:
         """One robot stepped as the environment steps it: the same observation draws as
@@ -296,7 +307,7 @@ class PolicyPlanner:
         observer = self._observer
         observer.set_scene(0, scene)
         per_step = observer.draws_one()
-        lean = self._lean_inputs() if self.fast is not None else None
+        lean = self._lean_step()
         world, low1, high1 = scene.world, scene.low[None], scene.high[None]
         goal = np.asarray(problem.goal, np.float64)
         clip_target = env.bounds == "clip"
@@ -307,6 +318,7 @@ class PolicyPlanner:
         success = False
         end = "horizon"
         stall_r = self.stall_distance
+        scale = np.asarray(robot.action_scale, np.float64)
         t_obs = t_net = t_motion = 0.0
         t = 0  # steps taken (verified)
         ctx = torch_threads(1) if self.fast is None else contextlib.nullcontext()
@@ -318,16 +330,15 @@ class PolicyPlanner:
                 for s in range(t, horizon):
                     u = self._uniforms((s + 1) * per_step)[s * per_step : (s + 1) * per_step]
                     ta = time.perf_counter()
-                    if lean is not None:
-                        x, g = lean(qq, goal, u)
-                        tb = time.perf_counter()
-                        a = self.fast(x, g)  # type: ignore[misc]
+                    if lean is not None:  # observation and network in one (timed as network)
+                        tb = ta
+                        a = lean(qq, goal, u)
                     else:
                         obs = observer.observe_one(qq, u=u)
                         tb = time.perf_counter()
                         a = self._act(obs, qq, goal)
                     tc = time.perf_counter()
-                    tw = np.clip(np.asarray(a, np.float64), -1.0, 1.0) * robot.action_scale
+                    tw = np.clip(a, -1.0, 1.0) * scale  # float64, as the env computes it
                     qq = _free_move_end(robot, qq, tw, scene.low, scene.high, clip_target)
                     t_obs += tb - ta
                     t_net += tc - tb
