@@ -20,7 +20,10 @@ Planners (``--planners``, comma separated):
   validity checker (a hand-written disc-against-boxes test on plain floats, no numpy) and
   OMPL's own C++ ``DiscreteMotionValidator`` checking states 0.01 apart; range 0.07. This
   is the setup of the issue's report (its OMPL times).
+- ``ompl-simplify``: ``ompl`` followed by OMPL's path simplifier (``simplifySolution``:
+  shortcuts and smoothing, its motions checked by pointplan's edge check too).
 - ``birrt``: our Bi-RRT (RRT-Connect + 100 shortcuts).
+- ``hybrid``: ``make_planner("hybrid", robot)``: the policy, then Bi-RRT where it fails.
 
 Printed: time per problem (median / mean, ms) as wall time and as the thread's CPU time
 (on a shared machine the wall time of a 2 ms call swings by 2-3x between runs, the CPU time
@@ -107,7 +110,7 @@ class OMPLReference:
         planner = og.RRTConnect(si)
         planner.setRange(self.range)
         ss.setPlanner(planner)
-        ss.solve(self.time_limit)
+        ss.solve(ob.timedPlannerTerminationCondition(self.time_limit))  # no watcher thread
         path = None
         if ss.haveExactSolutionPath():
             path = np.array([[s[0], s[1]] for s in ss.getSolutionPath().getStates()])
@@ -131,13 +134,36 @@ class PolicyBefore:
         self.planner = make_planner("policy", robot)
         self.torch_threads = torch_threads
 
+        #: seconds in the batched core's observe, the network and the core's step (q_free
+        #: and the rest of an env step), and steps taken
+        self.split = {"observe": 0.0, "network": 0.0, "motion": 0.0, "steps": 0}
+
     def plan(self, problem: Problem) -> PlanResult:
         import torch
 
+        from pointplan.envs.core import BatchedCore
+
         if self.torch_threads:
             torch.set_num_threads(self.torch_threads)
-        p = self.planner
-        return rollout_batch(p.policy, p.robot, p.env, [problem], p.horizon)[0]
+        p, split = self.planner, self.split
+        observe, step = BatchedCore.observe, BatchedCore.step
+
+        def timed(fn: Callable[..., Any], key: str) -> Callable[..., Any]:
+            def run(*a: Any, **kw: Any) -> Any:
+                t = time.perf_counter()
+                out = fn(*a, **kw)
+                split[key] += time.perf_counter() - t
+                return out
+
+            return run
+
+        BatchedCore.observe, BatchedCore.step = timed(observe, "observe"), timed(step, "motion")  # type: ignore[method-assign]
+        try:
+            res = rollout_batch(timed(p.policy, "network"), p.robot, p.env, [problem], p.horizon)[0]
+        finally:
+            BatchedCore.observe, BatchedCore.step = observe, step  # type: ignore[method-assign]
+        split["steps"] += res.nodes
+        return res
 
 
 def build(name: str, robot: Any, args: argparse.Namespace) -> Any:
@@ -147,6 +173,10 @@ def build(name: str, robot: Any, args: argparse.Namespace) -> Any:
         return PolicyBefore(robot, args.torch_threads)
     if name == "ompl":
         return make_planner("ompl:RRTConnect", robot)
+    if name == "ompl-simplify":
+        pl = make_planner("ompl:RRTConnect", robot, simplify=True)
+        pl.name = "ompl-simplify"
+        return pl
     if name == "ompl-ref":
         return OMPLReference(robot)
     if name == "birrt":
@@ -164,7 +194,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--problems", type=int, default=400, help="2D-Narrow test problems 0..N-1 (default: %(default)s)")
     ap.add_argument("--seed", type=int, default=0, help="start/goal seed of the problems (default: %(default)s)")
-    ap.add_argument("--planners", default="policy,policy-before,ompl,ompl-ref,birrt")
+    ap.add_argument("--planners", default="policy,policy-before,ompl,ompl-simplify,ompl-ref,birrt,hybrid")
     ap.add_argument("--torch-threads", type=int, help="PyTorch threads for policy-before (default: PyTorch's own)")
     args = ap.parse_args()
 
@@ -182,6 +212,8 @@ def main() -> None:
     for pl in planners.values():  # imports, compilation, first calls
         for p in warm:
             pl.plan(p)
+        if hasattr(pl, "reset"):  # Bi-RRT: the same draws as `pointplan eval`
+            pl.reset()
     rows: dict[str, dict[str, list[float]]] = {n: {"time": [], "cpu": [], "ok": [], "nodes": [], "checks": [], "length": []} for n in names}
     split = {"observe": 0.0, "network": 0.0, "motion": 0.0, "steps": 0}
     scene_prep: list[float] = []
@@ -231,16 +263,23 @@ def main() -> None:
             f"{np.mean(r['nodes']):>7.1f} {np.mean(r['checks']):>8.0f} {np.nanmean(r['length']):>7.3f}"
         )
     print("(times in ms; length: path length counted to the goal, mean over the problems the evaluator accepts)")
-    if split["steps"]:
-        s = split["steps"]
-        total = split["observe"] + split["network"] + split["motion"]
+    for name, sp in (("policy", split), ("policy-before", getattr(planners.get("policy-before"), "split", None))):
+        if not sp or not sp["steps"] or name not in rows:
+            continue
+        s = sp["steps"]
+        total = sp["observe"] + sp["network"] + sp["motion"]
         print(
-            f"policy per step ({s} steps): observation {1e6 * split['observe'] / s:.1f} us, network {1e6 * split['network'] / s:.1f} us, "
-            f"motion check {1e6 * split['motion'] / s:.1f} us, rest {1e6 * (float(np.sum(rows['policy']['time'])) - total) / s:.1f} us "
-            f"(scene set-up, goal connection, bookkeeping; per step)"
+            f"{name} per step ({s} steps), wall: observation {1e6 * sp['observe'] / s:.1f} us, network {1e6 * sp['network'] / s:.1f} us, "
+            f"motion check {1e6 * sp['motion'] / s:.1f} us, rest {1e6 * (float(np.sum(rows[name]['time'])) - total) / s:.1f} us"
+        )
+    if split["steps"]:
+        print(
+            "  (policy: the observation is folded into the network's input layer for the disc; motion check = the free-move ends "
+            "plus the one batched q_free call per run; rest = set-up, the goal connection, bookkeeping. "
+            "policy-before: observation = BatchedCore.observe, motion check = BatchedCore.step with its q_free)"
         )
         print(f"policy scene preparation (the observer's point set of a new workspace, like the collision world untimed above): median {1e6 * float(np.median(scene_prep)):.0f} us")
-    for a, b in (("policy", "ompl"), ("policy", "ompl-ref"), ("policy", "birrt"), ("policy-before", "ompl-ref"), ("ompl", "ompl-ref"), ("hybrid", "birrt")):
+    for a, b in (("policy", "ompl"), ("policy", "ompl-ref"), ("policy", "birrt"), ("policy", "policy-before"), ("policy-before", "ompl-ref"), ("ompl", "ompl-ref"), ("ompl", "birrt"), ("hybrid", "birrt")):
         if a in med and b in med:
             print(f"median time {a} / {b}: wall {med[a] / med[b]:.2f}, cpu {cmed[a] / cmed[b]:.2f}")
 

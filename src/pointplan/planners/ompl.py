@@ -200,7 +200,10 @@ class OMPLPlanner:
         if hasattr(planner, "setRange"):
             planner.setRange(self.range)
         ss.setPlanner(planner)
-        status = ss.solve(self.time_limit)
+        # a termination condition that checks the clock itself: ``solve(seconds)`` with 1 s
+        # or more starts a watcher thread per query, which costs a loaded machine
+        # milliseconds of wall time
+        status = ss.solve(ob.timedPlannerTerminationCondition(self.time_limit))
         exact = bool(status) and ss.haveExactSolutionPath()
         path = None
         if exact:
