@@ -137,3 +137,25 @@ def test_goal_and_obs_inputs_unchanged() -> None:
     assert np.array_equal(goal_input(robot, q[None], g[None])[0], ((g - q) / robot.action_scale).astype(np.float32))
     obs = np.ones((1, 3, 4), np.float32)
     assert np.allclose(obs_input(robot, obs)[0, :, :2], 1 / 0.07)
+
+
+@pytest.mark.parametrize("robot_name", ["sphere3d", "sshape"])
+def test_one_robot_rollout_in_3d_matches_the_batched_one(robot_name: str) -> None:
+    from pointplan.models.actor_critic import Actor, NetConfig
+    from pointplan.models.encoders import EncoderConfig
+    from pointplan.planners.policy import PolicyPlanner
+    from pointplan.scenes.scenarios import make_scenario
+
+    scenario = make_scenario("boxes3d", robot=robot_name)
+    robot = scenario.robot
+    torch.manual_seed(0)
+    actor = Actor((64, 6), robot.twist_dim, robot.twist_dim, NetConfig(EncoderConfig("pointnet", 32, 2), head_width=32, head_layers=2))
+    policy = Policy(actor, robot, {"observation": "global", "n_points": 64, "horizon": 12})
+    planner = PolicyPlanner(policy)
+    assert planner.fast is not None
+    for i in range(2):
+        p = scenario.problem("test", i, seed=0)
+        a = planner.plan(p)
+        b = rollout_batch(policy, robot, planner.env, [p], planner.horizon)[0]
+        assert a.nodes == b.nodes and a.success == b.success
+        np.testing.assert_allclose(a.path[: len(b.path)], b.path, atol=1e-5)

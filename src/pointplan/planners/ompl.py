@@ -57,6 +57,27 @@ def _ompl() -> tuple[Any, Any, Any]:
     return ob, og, ou
 
 
+_MOTION_VALIDATOR: Any = None
+
+
+def _motion_validator_class(ob: Any) -> Any:
+    """An ``ob.MotionValidator`` whose ``checkMotion(s1, s2)`` calls a Python function
+    (one subclass for the process: OMPL's bindings register every subclass made)."""
+    global _MOTION_VALIDATOR
+    if _MOTION_VALIDATOR is None:
+
+        class PythonMotionValidator(ob.MotionValidator):  # type: ignore[misc, name-defined]
+            def __init__(self, si: Any, check: Any) -> None:
+                super().__init__(si)
+                self.check = check
+
+            def checkMotion(self, s1: Any, s2: Any, *rest: Any) -> bool:
+                return bool(self.check(s1, s2))
+
+        _MOTION_VALIDATOR = PythonMotionValidator
+    return _MOTION_VALIDATOR
+
+
 def have_ompl() -> bool:
     """Is the optional ``ompl`` package installed?"""
     try:
@@ -181,13 +202,12 @@ class OMPLPlanner:
         if self.motion_check == "pointplan":
             resolution = self.resolution
 
-            class _Motion(ob.MotionValidator):
-                def checkMotion(self, s1: Any, s2: Any, *rest: Any) -> bool:
-                    ok, n = edge_free(robot, world, read(s1), read(s2), resolution, low, high)
-                    checks[0] += n
-                    return ok
+            def motion(s1: Any, s2: Any) -> bool:
+                ok, n = edge_free(robot, world, read(s1), read(s2), resolution, low, high)
+                checks[0] += n
+                return ok
 
-            si.setMotionValidator(_Motion(si))
+            si.setMotionValidator(_motion_validator_class(ob)(si, motion))
         else:
             si.setStateValidityCheckingResolution(self.resolution / si.getMaximumExtent())
         si.setup()

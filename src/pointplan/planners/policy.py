@@ -184,6 +184,11 @@ class PolicyPlanner:
     the shipped policy that succeed would have stopped. ``connect_goal``: end successful
     paths at the goal when the last edge is free (default). ``info["time_split"]`` of a
     ``plan`` result has the seconds spent observing, in the network and in motion checks.
+
+    A PointNet actor is copied to numpy when the planner is made (later changes to the
+    policy's weights are not seen; make a new planner). Scenes with moving obstacles and
+    image observations go through ``rollout_batch`` (PyTorch on one thread), which runs to
+    the horizon: no stall test there.
     """
 
     name = "policy"
@@ -228,7 +233,7 @@ class PolicyPlanner:
         if self._observer is None:
             probe = BatchedCore(_GivenProblems(self.robot, self.horizon), 1, replace(self.env, horizon=self.horizon))
             self._observer = probe.observer
-        if not isinstance(self._observer, PointSetObserver):
+        if not isinstance(self._observer, PointSetObserver) or type(self._observer).observe is not PointSetObserver.observe:
             return self._plan_batched(problem)
         return self._rollout_one(problem)
 
