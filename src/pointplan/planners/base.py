@@ -38,7 +38,7 @@ class PlanResult:
     trees: list[tuple[Array, NDArray[np.int64]]] = field(default_factory=list)
     #: the path before shortcutting, if the planner smooths it
     raw_path: Array | None = None
-    #: planner-specific details (e.g. the policy's ``goal_reached`` / ``end``, OMPL's
+    #: planner-specific details (e.g. the policy's ``end`` and ``goal_connection``, OMPL's
     #: ``status``, the hybrid planner's split of nodes)
     info: dict[str, Any] = field(default_factory=dict)
 
