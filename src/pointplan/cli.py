@@ -92,11 +92,17 @@ def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
     kwargs: dict[str, Any] = {}
     if name == "birrt":
         kwargs = {"max_nodes": args.max_nodes, "seed": seed}
-    elif name == "policy":
+    elif name in ("policy", "hybrid"):
         kwargs = {"checkpoint": getattr(args, "checkpoint", None), "observation": getattr(args, "observation", None)}
+        if name == "hybrid":
+            kwargs.update(max_nodes=args.max_nodes, seed=seed)
+    elif name.lower().startswith("ompl:"):
+        kwargs = {"time_limit": getattr(args, "time_limit", None) or 1.0}
+        if getattr(args, "range", None):
+            kwargs["range"] = args.range
     try:
         return make_planner(name, robot, **kwargs)
-    except ValueError as e:
+    except (ValueError, ImportError) as e:
         raise CLIError(str(e)) from None
 
 
@@ -111,10 +117,12 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument("--env", default="narrow2d", help="scenario: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d (default: narrow2d)")
     p.add_argument("--scene", help="plan on a scene file (JSON, see docs/scenes.md) instead of --env")
     p.add_argument("--robot", help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot), or the robot of a scene file that names none")
-    p.add_argument("--planner", default=planner_default, help="birrt, straight or policy (default: %(default)s)")
+    p.add_argument("--planner", default=planner_default, help="birrt, straight, policy, hybrid (the policy, then Bi-RRT where it fails) or ompl:NAME for an OMPL planner such as ompl:RRTConnect (pip install 'pointplan[ompl]') (default: %(default)s)")
     p.add_argument("--checkpoint", help="trained policy for --planner policy (default: the policy that ships for the robot and --observation)")
     p.add_argument("--observation", help="what the robot observes (the policy's input; drawn by render and view): 2D surface, surface-normals, interior or image; 3D global or local (policy default: the one that ships for the robot)")
     p.add_argument("--max-nodes", type=int, default=20000, help="Bi-RRT node budget (default: %(default)s)")
+    p.add_argument("--time-limit", type=float, help="seconds per problem for ompl:NAME planners (default: 1)")
+    p.add_argument("--range", type=float, help="longest edge of ompl:NAME planners that have one (default: 0.07, Bi-RRT's step)")
     p.add_argument("--seed", type=int, default=0, help="problem-set seed (default: %(default)s)")
 
 

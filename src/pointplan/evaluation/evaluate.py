@@ -113,7 +113,8 @@ class EpisodeRecord:
     claimed_success: bool
     nodes: int
     collision_checks: int
-    #: geodesic length of the path (NaN when the path failed the check)
+    #: geodesic length of the path plus the distance from its end to the goal (NaN when
+    #: the path failed the check)
     path_length: float
     #: wall time of ``planner.plan``, seconds (measured by the evaluator)
     time_s: float
@@ -190,7 +191,8 @@ def evaluate(
                 claimed_success=bool(result.success),
                 nodes=int(result.nodes),
                 collision_checks=int(result.collision_checks),
-                path_length=path_length(robot, path) if ok else math.nan,
+                # counted to the goal: a path that stops within the tolerance is charged the rest
+                path_length=path_length(robot, path) + float(robot.distance(path[-1], problem.goal)) if ok else math.nan,
                 time_s=elapsed,
                 path=path,
             )

@@ -132,6 +132,39 @@ class PointSetObserver(Observer):
             np.take_along_axis(sn, idx[..., None], axis=1),
         )
 
+    def points_one(self) -> tuple[Array, Array]:
+        """World points and normals of the single bound scene (what :meth:`observe_one`
+        draws its subset from)."""
+        return self._pts[0], self._nrm[0]
+
+    def draws_one(self) -> int:
+        """How many uniform numbers one observation of the single bound scene draws
+        (:meth:`observe_one` takes them as ``u``)."""
+        return max(len(self._pts[0]), 1) + self.n_points
+
+    def observe_one(self, q: Array, rng: np.random.Generator | None = None, u: Array | None = None) -> NDArray[np.float32]:
+        """``observe(q[None], rng)[0]`` for an observer bound to one static scene, without
+        the batch machinery (a planner's batch-1 rollout calls this every step): the same
+        random draws, the same values. ``u`` may pass the ``draws_one()`` uniform numbers
+        instead of ``rng`` (drawn ahead in one block: the same stream)."""
+        pts, nrm = self._pts[0], self._nrm[0]
+        count, n = len(pts), self.n_points
+        m = max(count, 1)
+        if u is None:
+            assert rng is not None
+            u = rng.random(m + n)  # random_subsets' draws: keys for one set, then duplicates
+        if count == 0:
+            return np.zeros((n, self.features), np.float32)
+        idx = np.argsort(u[:m])[:n]
+        if count < n:
+            idx = np.concatenate([idx, (u[m + count : m + n] * count).astype(np.int64)])
+        q = np.asarray(q, np.float64)
+        p, nb = self.robot.to_body_frame(q[None], pts[idx][None], nrm[idx][None] if self.with_normals else None)
+        if self.with_normals:
+            assert nb is not None
+            return np.concatenate([p[0], nb[0]], -1).astype(np.float32)
+        return p[0].astype(np.float32)
+
     def observe(self, q: Array, rng: np.random.Generator, t: NDArray[np.int64] | None = None) -> NDArray[np.float32]:
         pw, nw = self.select(rng)
         pw, nw = self.move(pw, nw, t)

@@ -1,4 +1,6 @@
-"""Planners: Bi-RRT (RRT-Connect), the straight line, and a registry to build them by name."""
+"""Planners: Bi-RRT (RRT-Connect), the straight line, the learned policy, the hybrid
+(policy, then Bi-RRT), OMPL's planners (``ompl:NAME``, optional), and a registry to build
+them by name."""
 
 from __future__ import annotations
 
@@ -32,18 +34,47 @@ def _policy_factory(robot: Robot, checkpoint: str | None = None, observation: st
 PLANNERS["policy"] = _policy_factory
 
 
+def _hybrid_factory(
+    robot: Robot,
+    checkpoint: str | None = None,
+    observation: str | None = None,
+    max_nodes: int = 10000,
+    seed: int = 0,
+    stall_steps: int | None = 10,
+    stall_distance: float = 0.035,
+    **kw: Any,
+) -> Planner:
+    """The policy (``checkpoint`` or the shipped one), stopped when it stalls (moved less
+    than ``stall_distance`` over ``stall_steps`` steps) or at its horizon, then Bi-RRT
+    (``max_nodes``, ``seed``, other keywords) from its configuration closest to the goal."""
+    from .hybrid import HybridPlanner
+
+    policy = _policy_factory(robot, checkpoint=checkpoint, observation=observation, stall_steps=stall_steps, stall_distance=stall_distance)
+    return HybridPlanner(policy, BiRRT(robot, max_nodes=max_nodes, seed=seed, **kw))  # type: ignore[arg-type]
+
+
+PLANNERS["hybrid"] = _hybrid_factory
+
+
 def register_planner(name: str, factory: Callable[..., Planner]) -> None:
     """Make ``factory(robot, **kw)`` available to :func:`make_planner` as ``name``."""
     PLANNERS[name.lower()] = factory
 
 
 def make_planner(name: str, robot: Robot, **kw: Any) -> Planner:
-    """A planner by name (``birrt``, ``straight``, ``policy`` with ``checkpoint=``, or any
-    registered one)."""
+    """A planner by name (``birrt``, ``straight``, ``policy`` with ``checkpoint=``,
+    ``hybrid``, ``ompl:NAME`` for any OMPL geometric planner such as ``ompl:RRTConnect``,
+    or any registered one). ``ompl:`` planners raise ``ImportError`` naming
+    ``pip install 'pointplan[ompl]'`` when the optional ``ompl`` package is missing."""
+    key = name.strip().lower()
+    if key.startswith("ompl:"):
+        from .ompl import make_ompl_planner
+
+        return make_ompl_planner(robot, name.strip()[5:], **kw)
     try:
-        factory = PLANNERS[name.lower()]
+        factory = PLANNERS[key]
     except KeyError:
-        raise ValueError(f"unknown planner {name!r}; known: {', '.join(sorted(PLANNERS))}") from None
+        raise ValueError(f"unknown planner {name!r}; known: {', '.join(sorted(PLANNERS))}, ompl:NAME (e.g. ompl:RRTConnect)") from None
     return factory(robot, **kw)
 
 

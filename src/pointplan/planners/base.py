@@ -8,7 +8,7 @@ geodesics (``robot.interpolate``); the evaluator re-checks them independently.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,6 +38,9 @@ class PlanResult:
     trees: list[tuple[Array, NDArray[np.int64]]] = field(default_factory=list)
     #: the path before shortcutting, if the planner smooths it
     raw_path: Array | None = None
+    #: planner-specific details (e.g. the policy's ``end`` and ``goal_connection``, OMPL's
+    #: ``status``, the hybrid planner's split of nodes)
+    info: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
     def failure(cls, config_dim: int, nodes: int, collision_checks: int, time_s: float, **kw: object) -> PlanResult:

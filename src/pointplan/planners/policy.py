@@ -3,23 +3,40 @@
 ``rollout_batch`` plays many problems at once through the batched environment core
 (deterministic actions); ``PolicyPlanner`` wraps a trained :class:`~pointplan.models.policy.Policy`
 behind the :class:`Planner` protocol. Nodes are policy steps; collision checks are the
-sub-configurations ``q_free`` checked.
+sub-configurations ``q_free`` checked, plus those of the final connection to the goal.
+
+``PolicyPlanner.plan`` (one problem, as a user calls it) does not go through the batched
+core: it steps one robot with the environment's own pieces (the observer's draws, the
+policy, ``q_free``), with the network in numpy when it is a PointNet
+(:class:`~pointplan.models.policy.NumpyPointNetActor`) and otherwise PyTorch on one thread.
+Its rollouts are those of ``rollout_batch`` with one problem.
+
+The environment stops a rollout anywhere within ``goal_tolerance`` of the goal. The
+planner then tries the last step to the goal itself (the geodesic from the policy's last
+configuration, checked like a Bi-RRT edge): when it is free the path ends at the goal
+(``info["end"] == "goal"``), otherwise where the policy stopped (``"near-goal"``). A
+rollout that does not get there ends with ``"horizon"`` (or ``"stalled"``, ``"crushed"``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from ..envs.core import BatchedCore, EnvConfig
+from ..envs.core import BatchedCore, EnvConfig, q_free
 from ..robots.base import Robot
+from ..robots.point import Disc2D, Sphere3D
 from ..scenes.scenarios import Scenario
 from ..scenes.scene import Problem, Scene
 from .base import PlanResult
+from ..observers.base import PointSetObserver
+from .edges import edge_free
 
 ActFn = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
@@ -37,9 +54,85 @@ class _GivenProblems(Scenario):
         raise RuntimeError("rollouts play given problems only")
 
 
-def rollout_batch(act: ActFn, robot: Robot, env: EnvConfig, problems: Sequence[Problem], horizon: int, seed: int = 0, chunk: int = 100) -> list[PlanResult]:
+def _free_move_end(robot: Robot, q: np.ndarray, twist: np.ndarray, low: np.ndarray, high: np.ndarray, clip_target: bool) -> np.ndarray:
+    """Where ``q_free`` ends a move that nothing stops: ``q exp(twist)``, or with
+    ``clip_target`` that end clipped into the bounds (reached along ``log(q, clipped)``)."""
+    if isinstance(robot, (Disc2D, Sphere3D)):  # a translating ball: the same arithmetic, fewer calls
+        end1 = q + twist
+        if clip_target:
+            clipped1 = np.clip(end1, low, high)
+            if (clipped1 != end1).any():
+                return q + (clipped1 - q)
+        return end1
+    end = robot.integrate(q[None], twist[None])
+    if clip_target:
+        clipped = robot.clip(end, low, high)
+        if np.any(clipped != end):
+            end = robot.integrate(q[None], robot.log(q[None], clipped))
+    return end[0]
+
+
+def connect_to_goal(robot: Robot, problem: Problem, result: PlanResult, resolution: float = 0.01, t: int | None = None) -> PlanResult:
+    """End a successful rollout at the goal itself when the geodesic from its last
+    configuration to the goal is free (checked like a Bi-RRT edge, at ``resolution``; in a
+    scene whose obstacles move, against the obstacles at time ``t``, the step the
+    connection would take). The checks are added to ``collision_checks``; the goal is not a
+    node. Sets ``info["end"]`` (``goal``, ``near-goal``, or ``horizon`` for a failure that
+    does not already say why) and ``info["goal_connection"]``."""
+    t0 = time.perf_counter()
+    info = result.info
+    if not result.success or len(result.path) == 0:
+        info.setdefault("end", "horizon")
+        info["goal_connection"] = None
+        return result
+    last = result.path[-1]
+    if float(robot.distance(last, problem.goal)) <= 0.0:
+        info["end"], info["goal_connection"] = "goal", "free"
+        return result
+    scene = problem.scene
+    world = scene.world_at(len(result.path) if t is None else t) if scene.dynamic else scene.world
+    ok, checks = edge_free(robot, world, last, problem.goal, resolution, scene.low, scene.high)
+    result.collision_checks += checks
+    if ok:
+        result.path = np.concatenate([result.path, np.asarray(problem.goal, np.float64)[None]])
+    info["end"] = "goal" if ok else "near-goal"
+    info["goal_connection"] = "free" if ok else "blocked"
+    result.time_s += time.perf_counter() - t0
+    return result
+
+
+@contextlib.contextmanager
+def torch_threads(n: int) -> Iterator[None]:
+    """Run PyTorch on ``n`` threads inside the block (batch-1 inference on more threads
+    only oversubscribes the cores), and restore the previous count after."""
+    try:
+        import torch
+    except ImportError:  # pragma: no cover
+        yield
+        return
+    before = torch.get_num_threads()
+    if before != n:
+        torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        if before != n:
+            torch.set_num_threads(before)
+
+
+def rollout_batch(
+    act: ActFn,
+    robot: Robot,
+    env: EnvConfig,
+    problems: Sequence[Problem],
+    horizon: int,
+    seed: int = 0,
+    chunk: int = 100,
+    connect_goal: bool = False,
+) -> list[PlanResult]:
     """Roll ``act(obs, q, goal) -> actions`` out on every problem, ``chunk`` at a time.
-    The time of a chunk is shared equally by its problems."""
+    The time of a chunk is shared equally by its problems. With ``connect_goal`` each
+    successful path ends at the goal when it can (:func:`connect_to_goal`)."""
     results: list[PlanResult] = []
     env = replace(env, horizon=horizon)
     for c0 in range(0, len(problems), chunk):
@@ -55,6 +148,7 @@ def rollout_batch(act: ActFn, robot: Robot, env: EnvConfig, problems: Sequence[P
         checks = np.zeros(n, np.int64)
         active = np.ones(n, bool)
         success = np.zeros(n, bool)
+        crushed = np.zeros(n, bool)
         for t in range(horizon):
             obs = core.observe(rng)["observation"]  # (at each problem's own time step)
             a = np.asarray(act(obs, core.q.copy(), core.goal.copy()), np.float32)
@@ -64,22 +158,52 @@ def rollout_batch(act: ActFn, robot: Robot, env: EnvConfig, problems: Sequence[P
             length += active
             checks += np.where(active, info["collision_checks"], 0)
             success |= term & active
+            crushed |= info["crushed"] & active
             active &= ~(term | info["crushed"])  # a moving obstacle that hits the robot ends it
             if not active.any():
                 break
         dt = (time.perf_counter() - t0) / n
         for i in range(n):
             k = int(length[i])
-            results.append(PlanResult(path=paths[:k, i].copy(), success=bool(success[i]), nodes=k - 1, collision_checks=int(checks[i]), time_s=dt))
+            res = PlanResult(path=paths[:k, i].copy(), success=bool(success[i]), nodes=k - 1, collision_checks=int(checks[i]), time_s=dt)
+            if crushed[i]:
+                res.info["end"] = "crushed"
+            if connect_goal:
+                res = connect_to_goal(robot, probs[i], res, t=k)
+            results.append(res)
     return results
 
 
 class PolicyPlanner:
-    """Plan by rolling out a trained policy (deterministic mean actions)."""
+    """Plan by rolling out a trained policy (deterministic mean actions).
+
+    ``stall_steps``, ``stall_distance``: stop a rollout early when the robot's last
+    ``stall_steps`` steps took it less than ``stall_distance`` from where it was (it
+    dithers in place; ``info["end"] == "stalled"``). Off by default; the hybrid planner
+    uses 10 steps and half a step (0.035), under which none of 1,000 validation rollouts of
+    the shipped policy that succeed would have stopped. ``connect_goal``: end successful
+    paths at the goal when the last edge is free (default). ``info["time_split"]`` of a
+    ``plan`` result has the seconds spent observing, in the network and in motion checks.
+
+    A PointNet actor is copied to numpy when the planner is made (later changes to the
+    policy's weights are not seen; make a new planner). Scenes with moving obstacles and
+    image observations go through ``rollout_batch`` (PyTorch on one thread), which runs to
+    the horizon: no stall test there.
+    """
 
     name = "policy"
 
-    def __init__(self, policy: object, robot: Robot | None = None, horizon: int | None = None, env: EnvConfig | None = None) -> None:
+    def __init__(
+        self,
+        policy: object,
+        robot: Robot | None = None,
+        horizon: int | None = None,
+        env: EnvConfig | None = None,
+        stall_steps: int | None = None,
+        stall_distance: float = 0.035,
+        connect_goal: bool = True,
+        seed: int = 0,
+    ) -> None:
         from ..models.policy import Policy
 
         if isinstance(policy, (str, Path)):
@@ -93,10 +217,178 @@ class PolicyPlanner:
         if self.env.observation != policy.observation:
             raise ValueError(f"the policy was trained on {policy.observation!r} observations, not {self.env.observation!r}")
         self.horizon = int(horizon or policy.meta.get("horizon") or 50)
+        self.stall_steps = None if stall_steps is None else int(stall_steps)
+        self.stall_distance = float(stall_distance)
+        self.connect_goal = bool(connect_goal)
+        self.seed = int(seed)
+        #: the network as numpy arrays (weights as of now), or None: PyTorch on one thread
+        self.fast = policy.fast_actor()
+        self._observer: Any = None
+        self._stream_rng: np.random.Generator | None = None
+        self._stream = np.empty(0)
 
     def plan(self, problem: Problem) -> PlanResult:
-        return rollout_batch(self.policy, self.robot, self.env, [problem], self.horizon)[0]
+        if problem.scene.dynamic:
+            return self._plan_batched(problem)
+        if self._observer is None:
+            probe = BatchedCore(_GivenProblems(self.robot, self.horizon), 1, replace(self.env, horizon=self.horizon))
+            self._observer = probe.observer
+        if not isinstance(self._observer, PointSetObserver) or type(self._observer).observe is not PointSetObserver.observe:
+            return self._plan_batched(problem)
+        return self._rollout_one(problem)
+
+    def _plan_batched(self, problem: Problem) -> PlanResult:
+        with torch_threads(1):
+            res = rollout_batch(self.policy, self.robot, self.env, [problem], self.horizon, self.seed, connect_goal=self.connect_goal)[0]
+        return res
+
+    def _act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        from ..models.inputs import goal_input, obs_input
+
+        if self.fast is not None:
+            return self.fast(obs_input(self.robot, obs[None])[0], goal_input(self.robot, q, goal))
+        return self.policy(obs[None], q[None], goal[None])[0]
+
+    def _uniforms(self, k: int) -> np.ndarray:
+        """The first ``k`` numbers of the stream ``rollout_batch`` draws its observations
+        from (seed ``(seed, 0)``): the same for every problem, so drawn once and kept."""
+        if self._stream_rng is None:
+            self._stream_rng = np.random.default_rng(np.random.SeedSequence([self.seed, 0]))
+            self._stream = np.empty(0)
+        if len(self._stream) < k:
+            more = max(k - len(self._stream), 8192)
+            self._stream = np.concatenate([self._stream, self._stream_rng.random(more)])
+        return self._stream
+
+    def _lean_step(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None:
+        """For a robot that only translates, seeing points, with the numpy network:
+        ``(q, goal, u) -> action`` for the observation ``observe_one(q, u=u)``, without
+        building the observation. The body frame is a translation, so the input layer's
+        pre-activations are a per-scene table (``points / scale @ W + normals @ W + b``)
+        minus one row (``q / scale @ W``), gathered for the drawn points: the same
+        arithmetic up to float32 round-off (about 1e-7). ``None`` otherwise."""
+        robot, observer, fast = self.robot, self._observer, self.fast
+        if fast is None or not isinstance(robot, (Disc2D, Sphere3D)) or type(observer).observe_one is not PointSetObserver.observe_one:
+            return None
+        pts, nrm = observer.points_one()
+        count, n, d = len(pts), observer.n_points, robot.dim
+        if count == 0:
+            return None
+        m = max(count, 1)
+        s32 = np.float32(robot.action_scale[0])
+        w, b = fast.inp
+        x = (pts / robot.action_scale[0]).astype(np.float32)
+        if observer.with_normals:
+            x = np.concatenate([x, nrm.astype(np.float32)], 1)
+        table = x @ w + b  # (count, width)
+        w_pos = w[:d]
+        scale = robot.action_scale
+
+        def step(q: np.ndarray, goal: np.ndarray, u: np.ndarray) -> np.ndarray:
+            idx = np.argsort(u[:m])[:n]
+            if count < n:
+                idx = np.concatenate([idx, (u[m + count : m + n] * count).astype(np.int64)])
+            h = table[idx]
+            h -= (q / s32).astype(np.float32) @ w_pos
+            return fast.from_first_layer(h, ((goal - q) / scale).astype(np.float32))
+
+        return step
+
+    def _rollout_one(self, problem: Problem) -> PlanResult:
+        """One robot stepped as the environment steps it: the same observation draws as
+        ``rollout_batch`` with this one problem and the same ``q_free``, without the batch.
+
+        The motion checks are batched along the rollout: the policy runs ahead assuming
+        each move ends at its (bounds-clipped) target, as a free move does; then one
+        ``q_free`` call checks all those moves. Up to the first move that ``q_free`` ends
+        elsewhere (a collision, a bound) the rollout is exactly the sequential one; from
+        there it continues from where ``q_free`` put the robot, with the same draws. So
+        the result is the sequential rollout's, at one motion-check call per run ahead
+        instead of one per step."""
+        t0 = time.perf_counter()
+        robot, env, scene = self.robot, self.env, problem.scene
+        if problem.start.shape != (robot.config_dim,):
+            raise ValueError(f"problem {problem.tag or ''} does not fit robot {robot.name}")
+        observer = self._observer
+        observer.set_scene(0, scene)
+        per_step = observer.draws_one()
+        lean = self._lean_step()
+        world, low1, high1 = scene.world, scene.low[None], scene.high[None]
+        goal = np.asarray(problem.goal, np.float64)
+        clip_target = env.bounds == "clip"
+        tol, horizon, stall = env.goal_tolerance, self.horizon, self.stall_steps
+        q = np.asarray(problem.start, np.float64).copy()
+        path = [q]
+        checks = 0
+        success = False
+        end = "horizon"
+        stall_r = self.stall_distance
+        scale = np.asarray(robot.action_scale, np.float64)
+        t_obs = t_net = t_motion = 0.0
+        t = 0  # steps taken (verified)
+        ctx = torch_threads(1) if self.fast is None else contextlib.nullcontext()
+        with ctx:
+            while t < horizon and not success and end == "horizon":
+                # run ahead from (q, t), every move assumed free
+                qs, twists, dists = [q], [], []
+                qq = q
+                for s in range(t, horizon):
+                    u = self._uniforms((s + 1) * per_step)[s * per_step : (s + 1) * per_step]
+                    ta = time.perf_counter()
+                    if lean is not None:  # observation and network in one (timed as network)
+                        tb = ta
+                        a = lean(qq, goal, u)
+                    else:
+                        obs = observer.observe_one(qq, u=u)
+                        tb = time.perf_counter()
+                        a = self._act(obs, qq, goal)
+                    tc = time.perf_counter()
+                    tw = np.clip(a, -1.0, 1.0) * scale  # float64, as the env computes it
+                    qq = _free_move_end(robot, qq, tw, scene.low, scene.high, clip_target)
+                    t_obs += tb - ta
+                    t_net += tc - tb
+                    t_motion += time.perf_counter() - tc
+                    twists.append(tw)
+                    qs.append(qq)
+                    d = float(robot.distance(qq, goal))
+                    dists.append(d)
+                    if d < tol:
+                        break
+                    if stall is not None and s + 1 >= stall:
+                        back = s + 1 - stall  # the step ``stall`` steps before this one
+                        if float(robot.distance(qq, qs[back - t] if back >= t else path[back])) < stall_r:
+                            break
+                # check every move of the run in one call; keep what agrees
+                tc = time.perf_counter()
+                k = len(twists)
+                new_q, collided, n = q_free(robot, world, np.stack(qs[:-1]), np.stack(twists), np.repeat(low1, k, 0), np.repeat(high1, k, 0), env.substep, clip_target=clip_target)
+                t_motion += time.perf_counter() - tc
+                for j in range(k):
+                    q = new_q[j]
+                    path.append(q)
+                    checks += int(n[j])
+                    t += 1
+                    agrees = not collided[j] and np.array_equal(q, qs[j + 1])
+                    d = dists[j] if agrees else float(robot.distance(q, goal))
+                    if d < tol and not collided[j]:
+                        success = True
+                        break
+                    if stall is not None and t >= stall and float(robot.distance(q, path[t - stall])) < stall_r:
+                        end = "stalled"
+                        break
+                    if not agrees:
+                        break  # the run ahead went elsewhere from here: run again from q
+        steps = len(path) - 1
+        res = PlanResult(path=np.stack(path), success=success, nodes=steps, collision_checks=checks, time_s=time.perf_counter() - t0)
+        res.info["time_split"] = {"observe": t_obs, "network": t_net, "motion": t_motion, "steps": steps}
+        if not success:
+            res.info["end"] = end
+        if self.connect_goal:
+            res = connect_to_goal(robot, problem, res)
+        else:
+            res.info.setdefault("end", "near-goal" if success else end)
+        return res
 
     def plan_many(self, problems: Sequence[Problem]) -> list[PlanResult]:
         """All problems at once (much faster than one by one)."""
-        return rollout_batch(self.policy, self.robot, self.env, problems, self.horizon)
+        return rollout_batch(self.policy, self.robot, self.env, problems, self.horizon, self.seed, connect_goal=self.connect_goal)

@@ -1,0 +1,161 @@
+"""The policy as a batch-1 planner: the lean rollout, the numpy network, the goal connection."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from pointplan.evaluation import check_path, evaluate
+from pointplan.models.inputs import goal_input, obs_input
+from pointplan.models.policy import NumpyPointNetActor, Policy, shipped_checkpoint
+from pointplan.observers import make_observer
+from pointplan.planners import make_planner
+from pointplan.planners.policy import connect_to_goal, rollout_batch
+from pointplan.scenes.scenarios import Narrow2DScenario
+from pointplan.scenes.scene import Problem
+
+
+@pytest.fixture(scope="module")
+def problems() -> list[Problem]:
+    return Narrow2DScenario().problems("test", 30, seed=0)
+
+
+@pytest.fixture(scope="module")
+def planner():  # type: ignore[no-untyped-def]
+    return make_planner("policy", Narrow2DScenario().robot)
+
+
+def test_numpy_actor_matches_torch() -> None:
+    policy = Policy.from_checkpoint(shipped_checkpoint("disc2d"))
+    fast = NumpyPointNetActor.from_actor(policy.actor)
+    assert fast is not None
+    rng = np.random.default_rng(0)
+    obs = rng.normal(size=(5, 64, 4)).astype(np.float32)
+    goal = rng.normal(size=(5, 2)).astype(np.float32)
+    with torch.no_grad():
+        ref = policy.actor.act(torch.as_tensor(obs), torch.as_tensor(goal)).numpy()
+    np.testing.assert_allclose(fast(obs, goal), ref, atol=2e-6)
+    np.testing.assert_allclose(fast(obs[0], goal[0]), ref[0], atol=2e-6)
+
+
+def test_observe_one_is_observe_of_one(problems: list[Problem]) -> None:
+    robot = Narrow2DScenario().robot
+    for n_points in (64, 1000):  # fewer points than asked: padded by duplicates
+        a = make_observer("surface-normals", robot, n_points=n_points)
+        b = make_observer("surface-normals", robot, n_points=n_points)
+        a.bind([problems[0].scene])
+        b.bind([problems[0].scene])
+        ra, rb = np.random.default_rng(3), np.random.default_rng(3)
+        q = problems[0].start
+        for _ in range(3):
+            assert np.array_equal(a.observe(q[None], ra)[0], b.observe_one(q, rb))
+        u = rb.random(b.draws_one())
+        ra.random(b.draws_one())  # keep the streams level
+        assert np.array_equal(a.observe(q[None], np.random.default_rng(9))[0], b.observe_one(q, u=np.random.default_rng(9).random(b.draws_one())))
+
+
+def test_plan_is_the_batched_rollout(problems: list[Problem], planner) -> None:  # type: ignore[no-untyped-def]
+    robot = planner.robot
+    same = 0
+    for p in problems:
+        a = planner.plan(p)
+        b = rollout_batch(planner.policy, robot, planner.env, [p], planner.horizon)[0]
+        assert a.success == b.success
+        k = len(b.path)
+        if a.nodes == b.nodes and np.allclose(a.path[:k], b.path, atol=1e-5, rtol=0):
+            same += 1
+        # the policy's own steps are counted as nodes, the goal is not
+        assert a.nodes == len(a.path) - 1 - (a.info["end"] == "goal")
+        assert a.collision_checks >= b.collision_checks
+        assert {"observe", "network", "motion", "steps"} <= set(a.info["time_split"])
+    assert same >= len(problems) - 1  # float32 round-off may part a rare failing rollout
+
+
+def test_paths_end_at_the_goal_when_free(problems: list[Problem], planner) -> None:  # type: ignore[no-untyped-def]
+    robot = planner.robot
+    ends = []
+    for p in problems:
+        r = planner.plan(p)
+        ends.append(r.info["end"])
+        if r.info["end"] == "goal":
+            assert np.array_equal(r.path[-1], p.goal)
+            assert check_path(robot, p, r.path, tolerance=1e-9)
+        elif r.info["end"] == "near-goal":
+            assert r.info["goal_connection"] == "blocked"
+            assert check_path(robot, p, r.path)
+        else:
+            assert not r.success
+    assert ends.count("goal") >= len(problems) - 3
+
+
+def test_connection_blocked_keeps_the_path() -> None:
+    from pointplan.geometry.shapes import Box
+    from pointplan.planners.base import PlanResult
+    from pointplan.scenes.scene import Scene
+
+    robot = Narrow2DScenario().robot
+    scene = Scene([Box(center=np.array([0.5, 0.5]), size=np.array([0.02, 0.5]))], np.zeros(2), np.ones(2))
+    p = Problem(scene, np.array([0.45, 0.5]), np.array([0.52 + 0.02, 0.5]))
+    res = PlanResult(path=p.start[None].copy(), success=True, nodes=0, collision_checks=0, time_s=0.0)
+    res = connect_to_goal(robot, p, res)
+    assert res.info["end"] == "near-goal" and len(res.path) == 1 and res.collision_checks > 0
+
+
+def test_evaluator_counts_length_to_the_goal(problems: list[Problem]) -> None:
+    from pointplan.planners.base import PlanResult
+
+    robot = Narrow2DScenario().robot
+    p = problems[0]
+
+    class Stopper:
+        name = "stopper"
+
+        def plan(self, problem: Problem) -> PlanResult:
+            # stops 0.05 short of the goal along the straight line, if that is free
+            d = problem.goal - problem.start
+            end = problem.goal - 0.05 * d / np.linalg.norm(d)
+            return PlanResult(np.stack([problem.start, end]), True, 1, 0, 0.0)
+
+    rec = evaluate(Stopper(), [p], robot, progress=False).records[0]
+    if rec.success:
+        assert rec.path_length == pytest.approx(float(robot.distance(p.start, p.goal)))
+
+
+def test_single_thread_and_batch_agree(problems: list[Problem], planner) -> None:  # type: ignore[no-untyped-def]
+    many = planner.plan_many(problems[:8])
+    for p, m in zip(problems[:8], many):
+        # the batch draws other point subsets: the same kind of outcome, not the same path
+        for r in (planner.plan(p), m):
+            assert r.info["end"] in ("goal", "near-goal", "horizon")
+            assert (r.info["end"] == "goal") == (r.success and np.array_equal(r.path[-1], p.goal))
+
+
+def test_goal_and_obs_inputs_unchanged() -> None:
+    robot = Narrow2DScenario().robot
+    q, g = np.array([0.1, 0.2]), np.array([0.3, 0.5])
+    assert np.array_equal(goal_input(robot, q[None], g[None])[0], ((g - q) / robot.action_scale).astype(np.float32))
+    obs = np.ones((1, 3, 4), np.float32)
+    assert np.allclose(obs_input(robot, obs)[0, :, :2], 1 / 0.07)
+
+
+@pytest.mark.parametrize("robot_name", ["sphere3d", "sshape"])
+def test_one_robot_rollout_in_3d_matches_the_batched_one(robot_name: str) -> None:
+    from pointplan.models.actor_critic import Actor, NetConfig
+    from pointplan.models.encoders import EncoderConfig
+    from pointplan.planners.policy import PolicyPlanner
+    from pointplan.scenes.scenarios import make_scenario
+
+    scenario = make_scenario("boxes3d", robot=robot_name)
+    robot = scenario.robot
+    torch.manual_seed(0)
+    actor = Actor((64, 6), robot.twist_dim, robot.twist_dim, NetConfig(EncoderConfig("pointnet", 32, 2), head_width=32, head_layers=2))
+    policy = Policy(actor, robot, {"observation": "global", "n_points": 64, "horizon": 12})
+    planner = PolicyPlanner(policy)
+    assert planner.fast is not None
+    for i in range(2):
+        p = scenario.problem("test", i, seed=0)
+        a = planner.plan(p)
+        b = rollout_batch(policy, robot, planner.env, [p], planner.horizon)[0]
+        assert a.nodes == b.nodes and a.success == b.success
+        np.testing.assert_allclose(a.path[: len(b.path)], b.path, atol=1e-5)
