@@ -5,7 +5,8 @@ configuration distance) and the exact distance from the robot's body to every ob
 computed with coal at every vertex and every dense configuration (2D scenes are extruded
 along z: a disc is a sphere in the plane ``z = 0``, a box a tall box). A path *touches* when
 some configuration has a distance below ``--touch`` (default 0: contact or penetration);
-the penetration is minus the smallest signed distance. Moving obstacles (3D-Dynamic) are
+the penetration is minus the smallest signed distance. Counted among the paths the planner
+claims and, separately, among those ``pointplan.evaluation.check_path`` accepts. Moving obstacles (3D-Dynamic) are
 checked in time: the path is cut into moves one action can make, and move ``k`` (from its
 start pose on) against the obstacles at time ``k + 1``.
 
@@ -203,6 +204,11 @@ def plan_all(name: str, robot: Robot, problems: list[Problem], checkpoint: str |
 
 
 def certify(scene_name: str, robot_name: str | None, planner: str, args: argparse.Namespace) -> str:
+    """Plan the test problems and count the touching paths among those the planner claims
+    and among those the evaluator accepts (in 3D-Dynamic, planners that ignore time claim
+    paths in the scene at time 0: only the evaluator's verdict is about the moving scene)."""
+    from pointplan.evaluation import check_path
+
     scenario = make_scenario(scene_name, robot=robot_name)
     robot = scenario.robot
     n = args.episodes_2d if robot.dim == 2 else args.episodes
@@ -210,21 +216,23 @@ def certify(scene_name: str, robot_name: str | None, planner: str, args: argpars
     t0 = time.perf_counter()
     results = plan_all(planner, robot, problems, args.checkpoint, args.max_nodes)
     t_plan = time.perf_counter() - t0
-    claimed = touching = 0
-    deepest = 0.0
+    count = {"claimed": [0, 0, 0.0], "accepted": [0, 0, 0.0]}  # paths, touching, deepest
     for prob, res in zip(problems, results):
-        if not res.success or not len(res.path):
+        path = np.asarray(res.path, np.float64)
+        if not len(path):
             continue
-        claimed += 1
-        d = worst_clearance(robot, prob.scene, res.path, args.spacing)
-        if d <= args.touch:
-            touching += 1
-            deepest = max(deepest, -d)
+        kinds = [k for k, yes in (("claimed", res.success), ("accepted", bool(check_path(robot, prob, path)))) if yes]
+        if not kinds:
+            continue
+        d = worst_clearance(robot, prob.scene, path, args.spacing)
+        for k in kinds:
+            count[k][0] += 1
+            if d <= args.touch:
+                count[k][1] += 1
+                count[k][2] = max(count[k][2], -d)
     t_all = time.perf_counter() - t0
-    return (
-        f"{scene_name:12s} {robot.name:9s} {planner:9s} problems {len(problems):4d}  claimed {claimed:4d}  "
-        f"touching {touching:4d}  max penetration {1000 * deepest:.3f} mm  (plan {t_plan:.0f} s, total {t_all:.0f} s)"
-    )
+    cells = "  ".join(f"{k} {c[0]:4d} touching {c[1]:4d} (max {1000 * c[2]:.3f} mm)" for k, c in count.items())
+    return f"{scene_name:12s} {robot.name:9s} {planner:9s} problems {len(problems):4d}  {cells}  plan {t_plan:.0f} s, total {t_all:.0f} s"
 
 
 def main() -> None:

@@ -46,11 +46,13 @@ class _Ball(Robot):
         # No rotation: a translation suffices.
         return points - np.asarray(q, np.float64)[..., None, :], normals
 
-    def collides(self, world, q):  # type: ignore[no-untyped-def]
+    def collides(self, world, q, radii=None, halfs=None):  # type: ignore[no-untyped-def]
         q = np.asarray(q, np.float64)
+        r = self.radius if radii is None else np.broadcast_to(np.asarray(radii, np.float64)[..., 0], q.shape[:-1])
         if world.batch_shape == ():  # any leading shape, as in Robot.collides
-            return world.spheres_collide(q.reshape(-1, self.dim), self.radius).reshape(q.shape[:-1])
-        return world.spheres_collide(q, self.radius)
+            r = r if np.ndim(r) == 0 else r.reshape(-1)
+            return world.spheres_collide(q.reshape(-1, self.dim), r).reshape(q.shape[:-1])
+        return world.spheres_collide(q, r)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(radius={self.radius})"
