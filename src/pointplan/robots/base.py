@@ -193,25 +193,26 @@ class Robot(ABC):
         seg = np.asarray(seg, np.float64)
         parts = self.parts
         lead = seg.shape[:-1]
-        if self.twist_dim == self.dim:  # translation only
-            v, w = seg, np.zeros(seg.shape[:-1] + (3,))
+        if self.twist_dim == self.dim:  # translation only: straight lines
+            v, w = seg, np.zeros(lead + (3,))
+            radii = np.sqrt(parts.sphere_radii**2 + (reach * reach) * np.sum(v * v, axis=-1)[..., None])
         elif self.twist_dim == 6 and self.dim == 3:
             v, w = seg[..., :3], seg[..., 3:]
-        else:
-            raise NotImplementedError(f"no motion bound for {type(self).__name__}")
-        wn = np.linalg.norm(w, axis=-1)[..., None]  # (..., 1)
-        if self.twist_dim == self.dim:
-            radii = np.sqrt(parts.sphere_radii**2 + (reach * np.linalg.norm(v, axis=-1))[..., None] ** 2)
-        else:
+            wn = np.linalg.norm(w, axis=-1)[..., None]
             u = v[..., None, :] + np.cross(w[..., None, :], parts.sphere_centers)  # (..., Ps, 3)
             radii = parts.sphere_radii + reach * (np.linalg.norm(u, axis=-1) + wn * parts.sphere_radii)
-        corners = self._corners  # (Pb, 8, d)
+        else:
+            raise NotImplementedError(f"no motion bound for {type(self).__name__}")
+        if not len(parts.box_halfs):
+            return radii, np.zeros(lead + (0, self.dim))
+        corners = self._corners  # (Pb, 2^d, d)
         if self.dim == 3:
             u = v[..., None, None, :] + np.cross(w[..., None, None, :], corners)  # (..., Pb, 8, 3)
         else:
             u = np.broadcast_to(v[..., None, None, :], lead + corners.shape)
         local = np.abs(np.einsum("pij,...pki->...pkj", parts.box_rotations, u))  # along part axes
-        turn = (0.5 * reach * reach) * wn[..., None] * np.linalg.norm(u, axis=-1)  # (..., Pb, 8)
+        wn = np.linalg.norm(w, axis=-1)[..., None, None]
+        turn = (0.5 * reach * reach) * wn * np.linalg.norm(u, axis=-1)  # (..., Pb, 2^d)
         halfs = parts.box_halfs + np.max(reach * local + turn[..., None], axis=-2)
         return radii, halfs
 

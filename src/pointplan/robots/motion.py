@@ -70,13 +70,15 @@ def _grown_collides(robot: Robot, world: CollisionWorld, q: Array, seg: Array, r
     twist_dim)`` between samples (``reach`` as in ``Robot.grown_parts``) plus ``margin``.
     With a single-scene world only the entries where ``mask`` is true are computed."""
     radii, halfs = robot.grown_parts(seg, reach)
-    radii = np.broadcast_to((radii + margin)[..., None, :], q.shape[:-1] + radii.shape[-1:])
-    halfs = np.broadcast_to((halfs + margin)[..., None, :, :], q.shape[:-1] + halfs.shape[-2:])
+    radii = (radii + margin)[..., None, :]  # (..., 1, Ps): the same for every sample
+    halfs = (halfs + margin)[..., None, :, :]
     if world.batch_shape != () or mask is None:
         return robot.collides(world, q, radii=radii, halfs=halfs)
     out = np.zeros(q.shape[:-1], dtype=bool)
     if mask.any():
-        out[mask] = robot.collides(world, q[mask], radii=radii[mask], halfs=halfs[mask])
+        radii = np.broadcast_to(radii, q.shape[:-1] + radii.shape[-1:])[mask]
+        halfs = np.broadcast_to(halfs, q.shape[:-1] + halfs.shape[-2:])[mask]
+        out[mask] = robot.collides(world, q[mask], radii=radii, halfs=halfs)
     return out
 
 
@@ -100,12 +102,13 @@ def check_motions(
     twist = np.asarray(twist, np.float64)
     n = np.maximum(np.asarray(n, np.int64), 1)
     lead = q0.shape[:-1]
-    n = np.broadcast_to(n, lead)
+    if n.shape != lead:
+        n = np.broadcast_to(n, lead)
     nmax = int(n.max()) if n.size else 1
     j = np.arange(nmax + 1)
     valid = j <= n[..., None]  # (..., J)
     s = np.minimum(j / n[..., None], 1.0)
-    qs = robot.integrate(np.broadcast_to(q0[..., None, :], lead + (nmax + 1, q0.shape[-1])), twist[..., None, :] * s[..., None])
+    qs = robot.integrate(q0[..., None, :], twist[..., None, :] * s[..., None])  # (..., J, cdim)
     seg = twist / n[..., None]
     ok = ~_grown_collides(robot, world, qs, seg, 0.5, CONTACT_MARGIN, valid)
     checks = n + 1
@@ -125,9 +128,12 @@ def check_motions(
         hi = np.asarray(high, np.float64)[..., None, :]
         out = np.any((pos < lo - BOUNDS_EPS) | (pos > hi + BOUNDS_EPS), axis=-1)
     stop = (~ok | out) & valid
-    stopped = stop.any(-1)
-    first = np.where(stopped, stop.argmax(-1), n + 1)
-    hit = np.take_along_axis(~ok, np.minimum(first, nmax)[..., None], -1)[..., 0]
+    first = stop.argmax(-1)
+    flat = first.reshape(-1)
+    at_first = ~ok.reshape(-1, nmax + 1)[np.arange(flat.size), flat].reshape(first.shape)
+    stopped = stop.reshape(-1, nmax + 1)[np.arange(flat.size), flat].reshape(first.shape)
+    first = np.where(stopped, first, n + 1)
+    hit = at_first
     return MotionCheck(free=first - 1, collided=stopped & hit, checks=checks, configs=qs)
 
 

@@ -48,9 +48,9 @@ class _Ball(Robot):
 
     def collides(self, world, q, radii=None, halfs=None):  # type: ignore[no-untyped-def]
         q = np.asarray(q, np.float64)
-        r = self.radius if radii is None else np.broadcast_to(np.asarray(radii, np.float64)[..., 0], q.shape[:-1])
+        r = self.radius if radii is None else np.asarray(radii, np.float64)[..., 0]
         if world.batch_shape == ():  # any leading shape, as in Robot.collides
-            r = r if np.ndim(r) == 0 else r.reshape(-1)
+            r = r if np.ndim(r) == 0 else np.broadcast_to(r, q.shape[:-1]).reshape(-1)
             return world.spheres_collide(q.reshape(-1, self.dim), r).reshape(q.shape[:-1])
         return world.spheres_collide(q, r)
 
