@@ -127,7 +127,8 @@ def march(
     frac = ends[1:] - ends[:-1]
     m = intervals(frac * d, resolution)
     starts = robot.integrate(q0[None], v[None] * ends[:, None])  # (n + 1, cdim): edge ends
-    chk = robot.check_motions(world, starts[:-1], v[None] * frac[:, None], m, low, high)  # type: ignore[arg-type]
+    first_only = np.arange(n) == 0  # later edges start where a certified one ends
+    chk = robot.check_motions(world, starts[:-1], v[None] * frac[:, None], m, low, high, fallback=first_only)  # type: ignore[arg-type]
     bad = chk.free < m
     n_free = int(np.argmax(bad)) if bad.any() else n
     checks = int(np.sum(chk.checks[: n_free + 1]))

@@ -227,10 +227,12 @@ class Robot(ABC):
             self.__dict__["_corners_cache"] = cached
         return cached
 
-    def check_motions(self, world: CollisionWorld, q0: Array, twist: Array, n: Array, low: Array | None = None, high: Array | None = None) -> MotionCheck:
+    def check_motions(
+        self, world: CollisionWorld, q0: Array, twist: Array, n: Array, low: Array | None = None, high: Array | None = None, fallback: Bool | None = None
+    ) -> MotionCheck:
         """Certify motions ``q0 exp(s twist)`` in ``n`` sub-steps each: see
         :func:`pointplan.robots.motion.check_motions`."""
-        return check_motions(self, world, q0, twist, n, low, high)
+        return check_motions(self, world, q0, twist, n, low, high, fallback)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"

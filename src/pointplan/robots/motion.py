@@ -65,13 +65,16 @@ class MotionCheck:
     configs: Array
 
 
-def _grown_collides(robot: Robot, world: CollisionWorld, q: Array, seg: Array, reach: float, margin: float, mask: Bool | None) -> Bool:
-    """Collision of the bodies at ``q: (..., J, cdim)`` grown for motions by ``seg: (...,
-    twist_dim)`` between samples (``reach`` as in ``Robot.grown_parts``) plus ``margin``.
-    With a single-scene world only the entries where ``mask`` is true are computed."""
+def _sizes(robot: Robot, seg: Array, reach: float) -> tuple[Array, Array]:
+    """Grown part sizes plus the contact margin, with a sample axis: ``(..., 1, Ps)`` and
+    ``(..., 1, Pb, d)``."""
     radii, halfs = robot.grown_parts(seg, reach)
-    radii = (radii + margin)[..., None, :]  # (..., 1, Ps): the same for every sample
-    halfs = (halfs + margin)[..., None, :, :]
+    return (radii + CONTACT_MARGIN)[..., None, :], (halfs + CONTACT_MARGIN)[..., None, :, :]
+
+
+def _collides(robot: Robot, world: CollisionWorld, q: Array, radii: Array, halfs: Array, mask: Bool | None = None) -> Bool:
+    """Collision of bodies of the given sizes at ``q: (..., J, cdim)``; with a single-scene
+    world and a ``mask: (..., J)`` only the masked entries are computed."""
     if world.batch_shape != () or mask is None:
         return robot.collides(world, q, radii=radii, halfs=halfs)
     out = np.zeros(q.shape[:-1], dtype=bool)
@@ -82,6 +85,17 @@ def _grown_collides(robot: Robot, world: CollisionWorld, q: Array, seg: Array, r
     return out
 
 
+def _start_fallback(robot: Robot, world: CollisionWorld, qs: Array, seg: Array, retry: Bool) -> Bool:
+    """For motions whose grown start collides (``retry: (...)``): is the first sub-step
+    certified by the plain start and sample 1 grown over the whole sub-step? ``(...)``."""
+    r0, h0 = _sizes(robot, seg, 0.0)
+    r1, h1 = _sizes(robot, seg, 1.0)
+    radii = np.concatenate([r0, r1], -2)  # (..., 2, Ps)
+    halfs = np.concatenate([h0, h1], -3)
+    mask = np.broadcast_to(retry[..., None], retry.shape + (2,))
+    return retry & ~_collides(robot, world, qs[..., :2, :], radii, halfs, mask).any(-1)
+
+
 def check_motions(
     robot: Robot,
     world: CollisionWorld,
@@ -90,6 +104,7 @@ def check_motions(
     n: Int,
     low: Array | None = None,
     high: Array | None = None,
+    fallback: Bool | None = None,
 ) -> MotionCheck:
     """Certify the motions ``q0 * exp(s twist)`` sampled in ``n`` sub-steps each.
 
@@ -97,6 +112,9 @@ def check_motions(
     ``world`` is a single scene or stacked with ``batch_shape == (...)`` (then ``q0`` is
     ``(E, config_dim)``). ``low, high`` (broadcasting to ``(..., d)``), if given, bound the
     positions of the samples: a sample outside stops the motion without being a collision.
+    ``fallback: (...)`` says which motions may certify their first sub-step from a start
+    too close for its grown check (default: all; a caller whose motion ``e`` starts where
+    motion ``e - 1`` ends needs it for the first only).
     """
     q0 = np.asarray(q0, np.float64)
     twist = np.asarray(twist, np.float64)
@@ -105,36 +123,28 @@ def check_motions(
     if n.shape != lead:
         n = np.broadcast_to(n, lead)
     nmax = int(n.max()) if n.size else 1
-    j = np.arange(nmax + 1)
-    valid = j <= n[..., None]  # (..., J)
-    s = np.minimum(j / n[..., None], 1.0)
+    # samples past a motion's own n repeat its end (same configuration, same sizes, same
+    # verdict), so they never stop a motion earlier than its end would: no mask needed
+    s = np.minimum(np.arange(nmax + 1) / n[..., None], 1.0)  # (..., J)
     qs = robot.integrate(q0[..., None, :], twist[..., None, :] * s[..., None])  # (..., J, cdim)
     seg = twist / n[..., None]
-    ok = ~_grown_collides(robot, world, qs, seg, 0.5, CONTACT_MARGIN, valid)
+    bad = _collides(robot, world, qs, *_sizes(robot, seg, 0.5))
     checks = n + 1
-    retry = ~ok[..., 0]
+    retry = bad[..., 0] if fallback is None else bad[..., 0] & fallback
     if retry.any():
-        # the start is too close for its grown check: the plain start and sample 1 grown
-        # over the whole first sub-step certify that sub-step instead
-        pair = qs[..., :2, :]
-        plain = ~_grown_collides(robot, world, pair[..., :1, :], seg, 0.0, CONTACT_MARGIN, retry[..., None])[..., 0]
-        wide = ~_grown_collides(robot, world, pair[..., 1:, :], seg, 1.0, CONTACT_MARGIN, retry[..., None])[..., 0]
-        ok[..., 0] |= retry & plain & wide
+        bad[..., 0] &= ~_start_fallback(robot, world, qs, seg, retry)
         checks = checks + 2 * retry
-    out = np.zeros(ok.shape, dtype=bool)
+    stop = bad
     if low is not None and high is not None:
-        pos = robot.positions(qs)
-        lo = np.asarray(low, np.float64)[..., None, :]
-        hi = np.asarray(high, np.float64)[..., None, :]
-        out = np.any((pos < lo - BOUNDS_EPS) | (pos > hi + BOUNDS_EPS), axis=-1)
-    stop = (~ok | out) & valid
+        mid, half = (np.asarray(high) + np.asarray(low)) / 2, (np.asarray(high) - np.asarray(low)) / 2 + BOUNDS_EPS
+        stop = bad | np.any(np.abs(robot.positions(qs) - mid[..., None, :]) > half[..., None, :], axis=-1)
+    if not stop.any():
+        return MotionCheck(free=n.copy(), collided=np.zeros(lead, bool), checks=checks, configs=qs)
     first = stop.argmax(-1)
-    flat = first.reshape(-1)
-    at_first = ~ok.reshape(-1, nmax + 1)[np.arange(flat.size), flat].reshape(first.shape)
-    stopped = stop.reshape(-1, nmax + 1)[np.arange(flat.size), flat].reshape(first.shape)
-    first = np.where(stopped, first, n + 1)
-    hit = at_first
-    return MotionCheck(free=first - 1, collided=stopped & hit, checks=checks, configs=qs)
+    at = (np.arange(first.size), first.reshape(-1))
+    stopped = stop.reshape(-1, nmax + 1)[at].reshape(lead)
+    hit = bad.reshape(-1, nmax + 1)[at].reshape(lead)
+    return MotionCheck(free=np.where(stopped, first, n + 1) - 1, collided=stopped & hit, checks=checks, configs=qs)
 
 
 def segments_free(robot: Robot, world: CollisionWorld, a: Array, b: Array, resolution: float, low: Array | None = None, high: Array | None = None) -> tuple[Bool, Int]:
