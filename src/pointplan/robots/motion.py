@@ -130,7 +130,7 @@ def check_motions(
     seg = twist / n[..., None]
     bad = _collides(robot, world, qs, *_sizes(robot, seg, 0.5))
     checks = n + 1
-    retry = bad[..., 0] if fallback is None else bad[..., 0] & fallback
+    retry = bad[..., 0].copy() if fallback is None else bad[..., 0] & fallback
     if retry.any():
         bad[..., 0] &= ~_start_fallback(robot, world, qs, seg, retry)
         checks = checks + 2 * retry
