@@ -46,6 +46,12 @@ class _Ball(Robot):
         # No rotation: a translation suffices.
         return points - np.asarray(q, np.float64)[..., None, :], normals
 
+    def grown_parts(self, seg: Array, reach: float) -> tuple[Array, Array]:
+        # the base class's formula for a translating sphere, without the box-part work
+        seg = np.asarray(seg, np.float64)
+        r2 = self.radius * self.radius + (reach * reach) * np.einsum("...i,...i->...", seg, seg)
+        return np.sqrt(r2)[..., None], np.zeros(seg.shape[:-1] + (0, self.dim))
+
     def collides(self, world, q, radii=None, halfs=None):  # type: ignore[no-untyped-def]
         q = np.asarray(q, np.float64)
         r = self.radius if radii is None else np.asarray(radii, np.float64)[..., 0]
