@@ -147,7 +147,8 @@ def test_sshape_growth_covers_rotation() -> None:
     twist = np.array([0.01, -0.004, 0.0, 0.0, 0.0, 0.2])
     n = 20
     radii, halfs = robot.grown_parts(twist / n, 0.5)
-    corners = robot._corners  # (5, 8, 3)
+    signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+    corners = robot.parts.box_centers[:, None] + signs * robot.parts.box_halfs[:, None]  # (5, 8, 3), bars unrotated
     for s in np.linspace(0, 1, 201):
         k = round(s * n)  # nearest sample
         qs, qk = robot.integrate(q0, twist * s), robot.integrate(q0, twist * k / n)

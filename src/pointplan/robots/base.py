@@ -198,33 +198,40 @@ class Robot(ABC):
             radii = np.sqrt(parts.sphere_radii**2 + (reach * reach) * np.sum(v * v, axis=-1)[..., None])
         elif self.twist_dim == 6 and self.dim == 3:
             v, w = seg[..., :3], seg[..., 3:]
-            wn = np.linalg.norm(w, axis=-1)[..., None]
-            u = v[..., None, :] + np.cross(w[..., None, :], parts.sphere_centers)  # (..., Ps, 3)
-            radii = parts.sphere_radii + reach * (np.linalg.norm(u, axis=-1) + wn * parts.sphere_radii)
+            radii = np.zeros(lead + (0,))
+            if len(parts.sphere_radii):
+                wn = np.linalg.norm(w, axis=-1)[..., None]
+                u = v[..., None, :] + np.cross(w[..., None, :], parts.sphere_centers)  # (..., Ps, 3)
+                radii = parts.sphere_radii + reach * (np.linalg.norm(u, axis=-1) + wn * parts.sphere_radii)
         else:
             raise NotImplementedError(f"no motion bound for {type(self).__name__}")
         if not len(parts.box_halfs):
             return radii, np.zeros(lead + (0, self.dim))
-        corners = self._corners  # (Pb, 2^d, d)
-        if self.dim == 3:
-            u = v[..., None, None, :] + np.cross(w[..., None, None, :], corners)  # (..., Pb, 8, 3)
-        else:
-            u = np.broadcast_to(v[..., None, None, :], lead + corners.shape)
-        local = np.abs(np.einsum("pij,...pki->...pkj", parts.box_rotations, u))  # along part axes
-        wn = np.linalg.norm(w, axis=-1)[..., None, None]
-        turn = (0.5 * reach * reach) * wn * np.linalg.norm(u, axis=-1)  # (..., Pb, 2^d)
-        halfs = parts.box_halfs + np.max(reach * local + turn[..., None], axis=-2)
-        return radii, halfs
+        pb, d = parts.box_halfs.shape
+        local = (seg @ self._corner_velocity).reshape(lead + (pb, -1, d))  # u at the corners, part axes
+        speed = np.sqrt(np.sum(local * local, axis=-1))  # (..., Pb, 2^d): |u|, rotation-invariant
+        wn = np.sqrt(np.sum(w * w, axis=-1))[..., None, None]
+        growth = reach * np.abs(local) + ((0.5 * reach * reach) * wn * speed)[..., None]
+        return radii, parts.box_halfs + np.max(growth, axis=-2)
 
     @property
-    def _corners(self) -> Array:
-        """Corners of the box parts in the body frame ``(Pb, 2^d, d)`` (computed once)."""
-        cached = self.__dict__.get("_corners_cache")
+    def _corner_velocity(self) -> Array:
+        """``(twist_dim, Pb * 2^d * d)``: the twist's linear map to the velocities ``v + w x
+        p`` of the box parts' corners ``p``, in each part's own axes (computed once)."""
+        cached = self.__dict__.get("_corner_velocity_cache")
         if cached is None:
             p = self.parts
             signs = np.array(np.meshgrid(*[[-1.0, 1.0]] * self.dim, indexing="ij")).reshape(self.dim, -1).T
-            cached = p.box_centers[:, None, :] + np.einsum("pij,pkj->pki", p.box_rotations, signs * p.box_halfs[:, None, :])
-            self.__dict__["_corners_cache"] = cached
+            corners = p.box_centers[:, None, :] + np.einsum("pij,pkj->pki", p.box_rotations, signs * p.box_halfs[:, None, :])
+            basis = np.eye(self.twist_dim)
+            rows = []
+            for e in basis:  # the velocity of each corner for a unit twist along e
+                if self.twist_dim == self.dim:
+                    u = np.broadcast_to(e, corners.shape)
+                else:
+                    u = e[:3] + np.cross(e[3:], corners)
+                rows.append(np.einsum("pij,pki->pkj", p.box_rotations, u).reshape(-1))
+            cached = self.__dict__["_corner_velocity_cache"] = np.array(rows)
         return cached
 
     def check_motions(
