@@ -94,7 +94,7 @@ def test_tiny_moves_are_checked() -> None:
     env.reset(seed=0, options={"problem": Problem(scene, [0.385, 0.5], [0.1, 0.9])})
     _, _, _, _, info = env.step(np.array([0.1, 0.0], np.float32))  # a 0.007 move
     assert info["collided"]
-    assert info["collision_checks"] == 1
+    assert info["collision_checks"] == 2  # one sub-step: its start and its end
 
 
 def test_bounds_clip_a_move_without_a_collision() -> None:

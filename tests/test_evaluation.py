@@ -55,9 +55,11 @@ def test_rejects_a_path_through_a_wall(robot: Disc2D, wall_problem: Problem) -> 
     # both vertices are free; only the segment between them crosses the thin wall
     path = np.array([[0.2, 0.3], [0.8, 0.3]])
     assert not robot.collides(wall_problem.scene.world, path).any()
-    assert not check_path(robot, wall_problem, path)
-    # a check that only looked at the vertices would have missed it
-    assert check_path(robot, wall_problem, path, resolution=1.0)
+    verdict = check_path(robot, wall_problem, path)
+    assert not verdict and "segment 0 touches" in verdict.reason
+    # the certificate does not sample at ``resolution`` (that only spaces the bounds
+    # check): even a coarse resolution does not let the segment through
+    assert not check_path(robot, wall_problem, path, resolution=1.0)
 
 
 def test_rejects_a_path_not_reaching_the_goal(robot: Disc2D, wall_problem: Problem) -> None:

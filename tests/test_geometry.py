@@ -641,7 +641,7 @@ def test_q_free_tiny_move_into_box_collides(index: int, box: int, side: int, t: 
     twist = -normal * move
     new_q, collided, checks = q_free(robot, scene.world, start[None], twist[None], scene.low[None], scene.high[None])
     assert collided[0]
-    assert checks[0] == 1
+    assert checks[0] >= 2  # the start and the end (and the start's fallback check)
     np.testing.assert_array_equal(new_q[0], start)
     # the same move away from the wall is free and taken in full
     new_q, collided, _ = q_free(robot, scene.world, start[None], -twist[None], scene.low[None], scene.high[None])

@@ -510,3 +510,23 @@ def test_compiled_box_kernel_matches_numpy(monkeypatch: pytest.MonkeyPatch) -> N
     assert compiled.hit[:10].all()
     np.testing.assert_allclose(compiled.distance[compiled.hit], plain.distance[plain.hit], atol=1e-12)
     np.testing.assert_allclose(compiled.normals[compiled.hit], plain.normals[plain.hit], atol=1e-12)
+
+
+def test_ray_from_inside_one_mesh_first_meeting_an_overlapping_one() -> None:
+    """Box A [1, 1, 1] at the origin, box B [.4, .4, .4] at [.5, 0, 0] (as meshes): a ray
+    from inside A meets B's near face first (0.6 away), yet it starts inside: distance 0."""
+    a = trimesh.creation.box(extents=[1.0, 1.0, 1.0])
+    b = trimesh.creation.box(extents=[0.4, 0.4, 0.4])
+    b.apply_translation([0.5, 0.0, 0.0])
+    meshes = [Mesh(a.vertices, a.faces), Mesh(b.vertices, b.faces)]
+    o = np.array([[-0.3, 0.01, 0.02], [-0.3, 0.01, 0.02], [-0.8, 0.01, 0.02]])
+    d = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    for order in (meshes, meshes[::-1]):
+        h = cast_rays(world_of(order), o, d)
+        assert h.hit.all()
+        np.testing.assert_allclose(h.distance, [0.0, 0.0, 0.3], atol=1e-9)
+        np.testing.assert_allclose(h.normals[:2], -d[:2])
+        np.testing.assert_allclose(h.points[0], o[0])
+    # from inside B (inside A too), along -x: still 0
+    h = cast_rays(world_of(meshes), np.array([[0.6, 0.0, 0.0]]), np.array([[-1.0, 0.0, 0.0]]))
+    assert h.distance[0] == 0.0

@@ -10,7 +10,7 @@ from gymnasium.utils.env_checker import check_env
 
 import pointplan  # noqa: F401  (registers the ids)
 from pointplan.envs import ENV_IDS
-from pointplan.evaluation.evaluate import check_path, timed_path
+from pointplan.evaluation.evaluate import check_path, densify, timed_path
 from pointplan.geometry.collision import (
     point_cone_sqdist,
     point_cylinder_sqdist,
@@ -254,7 +254,7 @@ def test_birrt_solves_fixed_problems_and_paths_pass_the_check(name: str) -> None
             assert check_path(sc.robot, p, res.path)
             # and the checker can fail: a path cut through the middle of an obstacle does not pass
             bad = np.array([p.start, p.goal])
-            if sc.robot.collides(p.scene.world, sc.robot.segment_configs(p.start, p.goal, 0.01)).any():
+            if sc.robot.collides(p.scene.world, densify(sc.robot, bad, 0.01)).any():
                 assert not check_path(sc.robot, p, bad)
 
 
@@ -262,7 +262,7 @@ def test_straight_line_in_3d_and_timed_paths() -> None:
     sc = make_scenario("boxes3d", robot="sshape")
     straight = make_planner("straight", sc.robot)
     results = [straight.plan(p) for p in sc.problems("test", 10)]
-    assert all(r.success == check_path(sc.robot, p, r.path) for r, p in zip(results, sc.problems("test", 10)) if r.success)
+    assert all(r.success == bool(check_path(sc.robot, p, r.path)) for r, p in zip(results, sc.problems("test", 10)) if r.success)
     robot = make_robot("sshape")
     path = np.array([[0, 0, 0, 0, 0, 0, 1.0], [0.2, 0, 0, 0, 0, 0, 1.0]])
     timed = timed_path(robot, path)
@@ -300,6 +300,6 @@ def test_env_and_evaluator_agree_on_noisy_rollouts(name: str, robot: str) -> Non
 
     problems = sc.problems("test", 24)
     results = rollout_batch(act, r, EnvConfig(observation="global"), problems, 80)
-    verdicts = [check_path(r, p, x.path) for p, x in zip(problems, results)]
+    verdicts = [bool(check_path(r, p, x.path)) for p, x in zip(problems, results)]
     assert [x.success for x in results] == verdicts
     assert 0 < sum(verdicts) < len(verdicts)  # both outcomes occur, so the comparison means something

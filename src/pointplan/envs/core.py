@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from ..geometry.collision import CollisionWorld
 from ..observers import make_observer
 from ..robots.base import Robot
+from ..robots.motion import intervals
 from ..scenes.scenarios import Scenario
 from ..scenes.scene import Problem, Scene
 
@@ -76,7 +77,13 @@ def q_free(
     one that collides or leaves the bounds. So the executed motion is always a piece of one
     geodesic from ``q`` (what the evaluator re-checks) and stays inside the bounds. Returns
     the new configurations, whether the move was stopped by a collision, and the number of
-    collision checks per environment. A move shorter than ``substep`` is still checked.
+    configurations checked per environment. A move shorter than ``substep`` is still checked.
+
+    The sub-steps are certified by the robot's motion validator
+    (:func:`pointplan.robots.motion.check_motions`): the body is grown at every sub-step so
+    that no configuration between two of them, nor the start pose, can touch an obstacle
+    unnoticed. With moving obstacles ``world`` is the world at the end of the step, and the
+    start pose is checked against it too.
     """
     q = np.asarray(q, np.float64)
     twist = np.asarray(twist, np.float64)
@@ -87,25 +94,12 @@ def q_free(
         if moved.any():  # aim at the clipped target instead: slide along the border, checked
             twist = twist.copy()
             twist[moved] = robot.log(q[moved], clipped[moved])
-    norm = np.linalg.norm(twist, axis=-1)
-    n = np.maximum(1, np.ceil(norm / substep - 1e-9)).astype(np.int64)
-    nmax = int(n.max())
-    k = np.arange(1, nmax + 1)
-    s = np.minimum(k[None, :] / n[:, None], 1.0)  # (E, nmax); extra sub-steps repeat the end
-    qs = robot.integrate(np.broadcast_to(q[:, None], (q.shape[0], nmax, q.shape[1])), twist[:, None] * s[..., None])
-    pos = robot.positions(qs)
-    out = np.any((pos < low[:, None] - 1e-12) | (pos > high[:, None] + 1e-12), axis=-1)
-    hit = robot.collides(world, qs)
-    valid = k[None, :] <= n[:, None]
-    stop = (hit | out) & valid
-    stopped = stop.any(-1)
-    first = np.where(stopped, stop.argmax(-1), n)  # index of the first sub-step that stops
+    n = intervals(np.linalg.norm(twist, axis=-1), substep)
+    chk = robot.check_motions(world, q, twist, n, low, high)
     rows = np.arange(q.shape[0])
-    collided = stopped & hit[rows, np.minimum(first, nmax - 1)]
-    last = first - 1
-    rows = np.arange(q.shape[0])
-    new_q = np.where((last >= 0)[:, None], qs[rows, np.maximum(last, 0)], q)
-    return new_q, collided, n
+    last = chk.free
+    new_q = np.where((last > 0)[:, None], chk.configs[rows, np.maximum(last, 0)], q)
+    return new_q, chk.collided, chk.checks
 
 
 class BatchedCore:

@@ -3,6 +3,7 @@
 from .evaluate import (
     EpisodeRecord,
     EvalReport,
+    PathCheck,
     check_path,
     densify,
     evaluate,
@@ -10,4 +11,4 @@ from .evaluate import (
     path_length,
 )
 
-__all__ = ["EpisodeRecord", "EvalReport", "check_path", "densify", "evaluate", "format_table", "path_length"]
+__all__ = ["EpisodeRecord", "EvalReport", "PathCheck", "check_path", "densify", "evaluate", "format_table", "path_length"]

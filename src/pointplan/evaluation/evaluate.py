@@ -1,7 +1,8 @@
 """Run a planner on a set of problems and score it.
 
 Success is decided here by :func:`check_path`, an independent re-check of the returned
-path, not by what the planner says; the two are both recorded and disagreements counted.
+path (its own method and code: exact distances and conservative advancement), not by what
+the planner says; the two are both recorded and disagreements counted.
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..planners.base import intervals
+from ..robots.motion import intervals
+from .clearance import Clearance, advance
 from ..robots.base import Robot
 from ..scenes.scene import Problem
 
@@ -24,41 +26,83 @@ Array = NDArray[np.float64]
 _BOUNDS_EPS = 1e-9
 
 
-def check_path(robot: Robot, problem: Problem, path: Array, resolution: float = 0.01, tolerance: float = 0.07) -> bool:
-    """Is ``path`` a valid solution of ``problem``?
+@dataclass(frozen=True)
+class PathCheck:
+    """Verdict of :func:`check_path`: true when the path is a valid solution; otherwise
+    ``reason`` says why (malformed input, wrong start, goal not reached, out of bounds,
+    touching an obstacle)."""
+
+    ok: bool
+    reason: str = ""
+    #: the smallest clearance met by the certificate (``inf`` when not computed)
+    clearance: float = math.inf
+
+    def __bool__(self) -> bool:
+        return self.ok
+
+
+def _malformed(robot: Robot, problem: Problem, path: Array, tolerance: float) -> str:
+    """Why ``path`` cannot be a solution before any collision check, or ``""``."""
+    if path.ndim != 2 or path.shape[-1] != robot.config_dim:
+        return f"a path must be a (K, {robot.config_dim}) array of {robot.name} configurations, got shape {path.shape}"
+    if path.shape[0] < 1:
+        return "the path is empty"
+    if not np.all(np.isfinite(path)):
+        rows = np.flatnonzero(~np.all(np.isfinite(path), axis=1))
+        return f"the path has non-finite values (NaN or inf) at configurations {rows[:5].tolist()}"
+    gap = float(robot.distance(path[0], problem.start))
+    if gap >= 1e-6:
+        return f"the path does not start at the problem's start (distance {gap:.3g})"
+    miss = float(robot.distance(path[-1], problem.goal))
+    if not miss < tolerance:
+        return f"the path ends {miss:.3g} from the goal (tolerance {tolerance})"
+    return ""
+
+
+def check_path(robot: Robot, problem: Problem, path: Array, resolution: float = 0.01, tolerance: float = 0.07) -> PathCheck:
+    """Is ``path`` a valid solution of ``problem``? Returns a :class:`PathCheck` (true or
+    false, with the reason).
 
     It must be a finite ``(K, config_dim)`` array with ``K >= 1`` that starts at the start
     (geodesic distance below 1e-6) and ends within ``tolerance`` of the goal (strictly, as
-    in the environment), and every geodesic segment between consecutive configurations,
-    checked at configurations at most ``resolution`` apart (both ends included), must be
-    collision-free with every position inside the scene bounds.
+    in the environment); the positions along every geodesic segment, at most
+    ``resolution`` apart (both ends included), must lie inside the scene bounds; and no
+    configuration of any segment, its ends included, may come within
+    :data:`~pointplan.evaluation.clearance.TOUCH` of an obstacle. That last part is
+    certified by conservative advancement on exact distances
+    (:mod:`pointplan.evaluation.clearance`), independently of the planners' own check.
 
     In a scene whose obstacles move, the path is executed in time: it is cut into moves one
     action can make (:func:`timed_path`), move ``j`` takes the robot from time ``j`` to
-    ``j + 1`` and is checked against the obstacles at time ``j + 1``, as in the environment.
+    ``j + 1`` and is checked, its start pose included, against the obstacles at time
+    ``j + 1``, as in the environment.
     """
     path = np.asarray(path, np.float64)
-    if path.ndim != 2 or path.shape[0] < 1 or path.shape[1] != robot.config_dim:
-        return False
-    if not np.all(np.isfinite(path)):
-        return False
-    if float(robot.distance(path[0], problem.start)) >= 1e-6:
-        return False
-    if not float(robot.distance(path[-1], problem.goal)) < tolerance:
-        return False
-    qs = densify(robot, path, resolution)
+    reason = _malformed(robot, problem, path, tolerance)
+    if reason:
+        return PathCheck(False, reason)
     scene = problem.scene
-    pos = robot.positions(qs)
+    pos = robot.positions(densify(robot, path, resolution))
     if np.any(pos < scene.low - _BOUNDS_EPS) or np.any(pos > scene.high + _BOUNDS_EPS):
-        return False
+        return PathCheck(False, "the path leaves the workspace bounds")
     if scene.dynamic:
-        timed = timed_path(robot, path)
-        for j in range(len(timed) - 1):
-            seg = densify(robot, timed[j : j + 2], resolution)[1:]
-            if bool(np.any(robot.collides(scene.world_at(j + 1), seg))):
-                return False
-        return True
-    return not bool(np.any(robot.collides(scene.world, qs)))
+        steps = timed_path(robot, path)
+        pieces = [(Clearance(robot, scene.obstacles_at(j + 1)), steps[j], steps[j + 1]) for j in range(len(steps) - 1)]
+        if len(steps) == 1:
+            pieces = [(Clearance(robot, scene.obstacles_at(0)), steps[0], steps[0])]
+    else:
+        world = Clearance(robot, scene.obstacles)
+        pieces = [(world, a, b) for a, b in zip(path[:-1], path[1:])] or [(world, path[0], path[0])]
+    low = math.inf
+    for j, (clear, a, b) in enumerate(pieces):
+        if (j == 0 or scene.dynamic) and clear.buried(a):
+            return PathCheck(False, f"segment {j} starts inside a mesh obstacle", 0.0)
+        free, d = advance(clear, robot, a, b)
+        low = min(low, d)
+        if not free:
+            what = "move" if scene.dynamic else "segment"
+            return PathCheck(False, f"{what} {j} touches an obstacle (clearance {d:.3g})", low)
+    return PathCheck(True, "", low)
 
 
 def timed_path(robot: Robot, path: Array) -> Array:
@@ -182,7 +226,7 @@ def evaluate(
         result = planner.plan(problem)
         elapsed = time.perf_counter() - t0
         path = np.asarray(result.path, np.float64)
-        ok = len(path) > 0 and check_path(robot, problem, path, resolution, tolerance)
+        ok = len(path) > 0 and bool(check_path(robot, problem, path, resolution, tolerance))
         n_ok += ok
         report.records.append(
             EpisodeRecord(

@@ -324,9 +324,27 @@ class CollisionWorld:
             hit |= np.any(d2 <= r2, -1)
         if self.dim == 3 and self.con_c.shape[-2]:
             hit |= np.any(point_cone_sqdist(c, self.con_c, self.con_r, self.con_rad, self.con_half) <= r2, -1)
-        hit |= self._spheres_vs_clouds(c, r)
-        hit |= self._coal_query(c, r, kind="sphere", meshes_only=True)
+        if self._has_clouds:
+            hit |= self._spheres_vs_clouds(c, r)
+        if self._has_meshes:
+            hit |= self._coal_query(c, r, kind="sphere", meshes_only=True)
         return hit
+
+    @property
+    def _has_clouds(self) -> bool:
+        """Whether any scene has point clouds (computed once)."""
+        flag = self.__dict__.get("_clouds_flag")
+        if flag is None:
+            flag = self.__dict__["_clouds_flag"] = any(t is not None for t in self.cloud_trees)
+        return bool(flag)
+
+    @property
+    def _has_meshes(self) -> bool:
+        """Whether any scene has meshes for coal (computed once)."""
+        flag = self.__dict__.get("_meshes_flag")
+        if flag is None:
+            flag = self.__dict__["_meshes_flag"] = any(it[4] is not None for items in self.coal_items for it in items)
+        return bool(flag)
 
     def boxes_collide(self, centers: Array, rotations: Array, halfs: Array) -> Bool:
         """Do 3D boxes ``centers: (*batch, M, 3)``, ``rotations: (*batch, M, 3, 3)``,
@@ -346,7 +364,7 @@ class CollisionWorld:
             # distance from each obstacle sphere centre to each robot box
             d2 = sphere_box_sqdist(self.sph_c, c, rot, h)  # (*batch, K, M)
             hit |= np.any(d2 <= (self.sph_r**2)[..., :, None], -2)
-        if any(t is not None for t in self.cloud_trees):
+        if self._has_clouds:
             for i, (ci, ri, hi) in enumerate(zip(self._per_scene(c), self._per_scene(rot), self._per_scene(h))):
                 tree = self.cloud_trees[i]
                 if tree is None:

@@ -29,8 +29,9 @@ Conventions
   face: a watertight, consistently wound mesh is oriented outward once (by the sign of its
   volume), and a first hit on a face whose outward normal points along the ray means the
   ray starts inside. Open or inconsistently wound meshes are surfaces only (no inside).
-  Meshes of one scene are cast as one mesh, so an origin inside mesh A whose first hit is
-  mesh B (B nested in A) reports the hit on B.
+  Meshes of one scene are cast as one mesh; an origin inside a solid mesh A whose first
+  hit is on another mesh B (B overlapping A, or nested in it) is found by a winding-number
+  test of the origin against every solid mesh, and reports distance 0 too.
 * Missed rays (nothing within ``max_range``): ``distance = inf``, ``hit = False`` and
   ``points``/``normals`` are **nan**.
 * Normals are unit outward surface normals at the hit, flipped where needed so that
@@ -339,6 +340,7 @@ class _MeshSet:
     intersector: Any
     normals: Array  # (F, 3) face normals, outward for solid meshes
     solid: Bool  # (F,) face belongs to a watertight, consistently wound mesh
+    solids: tuple[Mesh, ...] = ()  # the solid meshes (for the inside test of origins)
 
 
 _mesh_cache: OrderedDict[tuple[int, ...], _MeshSet] = OrderedDict()
@@ -373,7 +375,8 @@ def _mesh_set(meshes: Sequence[Mesh]) -> _MeshSet:
     intersector = _intersector_class()(combined)
     intersector.intersects_first(np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0]]))  # build now
     normals = np.asarray(combined.face_normals, np.float64)
-    entry = _MeshSet(tuple(meshes), intersector, normals, np.concatenate(solid))
+    solids = tuple(m for m, flags in zip(meshes, solid) if flags.size and flags[0])
+    entry = _MeshSet(tuple(meshes), intersector, normals, np.concatenate(solid), solids)
     _mesh_cache[key] = entry
     while len(_mesh_cache) > _MESH_CACHE_SIZE:
         _mesh_cache.popitem(last=False)
@@ -382,13 +385,34 @@ def _mesh_set(meshes: Sequence[Mesh]) -> _MeshSet:
 
 def _cast_meshes(meshes: Sequence[Mesh], o: Array, d: Array) -> tuple[Int, Array, Array, Bool]:
     """First mesh hits of rays ``(n, 3)``: ray indices, distances, normals (outward where
-    known), and whether the ray starts inside a solid mesh."""
+    known), and whether the ray starts inside a solid mesh.
+
+    A ray starts inside when its first hit leaves a solid mesh (the hit face's outward
+    normal points along the ray) or when its origin is inside any solid mesh by the winding
+    number: with overlapping meshes the first hit may belong to another mesh than the one
+    the origin is in. Rays starting inside are reported (distance 0) even if they hit
+    nothing."""
+    from .collision import mesh_contains
+
     ms = _mesh_set(meshes)
     tri, ray, loc = ms.intersector.intersects_id(o, d, multiple_hits=False, return_locations=True)
     tri, ray = np.asarray(tri, np.int64), np.asarray(ray, np.int64)
     t = np.maximum(_dot(np.asarray(loc, np.float64) - o[ray], d[ray]), 0.0)
     n = ms.normals[tri]
     inside = ms.solid[tri] & (_dot(n, d[ray]) > 0)
+    if ms.solids and len(o):
+        uniq, back = np.unique(o, axis=0, return_inverse=True)  # rays share few origins
+        within = np.zeros(len(uniq), bool)
+        for m in ms.solids:
+            within |= mesh_contains(m, uniq)
+        start_in = within[back.reshape(-1)]
+        inside |= start_in[ray]
+        lost = np.setdiff1d(np.flatnonzero(start_in), ray)  # inside, yet no face was hit
+        if len(lost):
+            ray = np.concatenate([ray, lost])
+            t = np.concatenate([t, np.zeros(len(lost))])
+            n = np.concatenate([n, -d[lost]])
+            inside = np.concatenate([inside, np.ones(len(lost), bool)])
     return ray, t, n, inside
 
 

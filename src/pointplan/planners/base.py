@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..robots.base import Robot
+from ..robots.motion import GRID_SLACK, intervals
 from ..scenes.scene import Problem
 
 Array = NDArray[np.float64]
@@ -83,25 +84,6 @@ class March:
     checks: int
 
 
-#: slack on ``length / resolution`` before rounding up, so that an edge of exactly ``step``
-#: gets the same number of intervals whatever the round-off of its length
-GRID_SLACK = 1e-9
-
-
-def intervals(length: Array, resolution: float) -> NDArray[np.int64]:
-    """Intervals of a checked edge: ``max(1, ceil(length / resolution - GRID_SLACK))``."""
-    return np.maximum(1, np.ceil(np.asarray(length) / resolution - GRID_SLACK).astype(np.int64))
-
-
-def _grid(m: NDArray[np.int64]) -> tuple[NDArray[np.int64], Array]:
-    """For edges of ``m`` intervals: edge index and fraction ``j / m`` of every grid point,
-    ``j = 0..m`` (both ends included), edge after edge."""
-    counts = m + 1
-    starts = np.cumsum(counts) - counts
-    idx = np.repeat(np.arange(len(m)), counts)
-    return idx, (np.arange(int(counts.sum())) - starts[idx]) / m[idx]
-
-
 def march(
     robot: Robot,
     problem_or_world: object,
@@ -115,12 +97,12 @@ def march(
     twist: Array | None = None,
 ) -> March:
     """Follow the geodesic ``q0 -> q1`` in edges of length ``step`` (the last one shorter),
-    each edge checked at ``intervals(length, resolution) + 1`` evenly spaced configurations,
-    both ends included.
+    each certified by the robot's motion validator in ``intervals(length, resolution)``
+    sub-steps (:func:`pointplan.robots.motion.check_motions`).
 
-    Stops at the first edge that collides or leaves the bounds, or after ``max_steps``
-    edges. All edges are checked in one ``robot.collides`` call; ``checks`` counts what an
-    edge-by-edge check would evaluate (every configuration of every edge up to and
+    Stops at the first edge that is not certified free or leaves the bounds, or after
+    ``max_steps`` edges. All edges are checked in one validator call; ``checks`` counts what
+    an edge-by-edge check would evaluate (every configuration of every edge up to and
     including the first blocked one), so it does not depend on the batching. ``twist``
     may pass ``robot.log(q0, q1)`` if it is already known.
 
@@ -140,44 +122,24 @@ def march(
     if n <= 0:
         return March(np.zeros((0, cdim)), False, 0)
     # Edge ends at fractions ``ends`` of the geodesic. It is a one-parameter subgroup, so the
-    # geodesic between two edge ends is the matching piece of the whole one: every grid
-    # point is ``q0 exp(s v)``, one exponential for all of them.
+    # geodesic between two edge ends is the matching piece of the whole one.
     ends = np.minimum(np.arange(n + 1) * (step / d), 1.0)
     reached = n == total
     if reached:
         ends[-1] = 1.0
-    m = intervals((ends[1:] - ends[:-1]) * d, resolution)
-    idx, frac = _grid(m)
-    s = ends[idx] + (ends[idx + 1] - ends[idx]) * frac
-    qs = robot.integrate(q0[None], v[None] * s[:, None])
-    offsets = np.cumsum(m + 1)
-    bad = robot.collides(world, qs) | ~in_bounds(robot, qs, low, high)  # type: ignore[arg-type]
-    if bad.any():
-        n_free = int(np.searchsorted(offsets, int(np.argmax(bad)), side="right"))  # first bad edge
-        checks = int(offsets[n_free])
-        reached = False
-    else:
-        n_free = n
-        checks = int(offsets[-1])
-    nodes = qs[offsets[:n_free] - 1]  # the far end of each free edge
+    frac = ends[1:] - ends[:-1]
+    m = intervals(frac * d, resolution)
+    starts = robot.integrate(q0[None], v[None] * ends[:, None])  # (n + 1, cdim): edge ends
+    first_only = np.arange(n) == 0  # later edges start where a certified one ends
+    chk = robot.check_motions(world, starts[:-1], v[None] * frac[:, None], m, low, high, fallback=first_only)  # type: ignore[arg-type]
+    bad = chk.free < m
+    n_free = int(np.argmax(bad)) if bad.any() else n
+    checks = int(np.sum(chk.checks[: n_free + 1]))
+    reached = reached and n_free == n
+    nodes = starts[1 : n_free + 1]
     if reached:
         nodes[-1] = q1  # exactly the target, not its round-off through exp
     return March(nodes, reached, checks)
-
-
-def edge_configs(robot: Robot, a: Array, b: Array, resolution: float) -> tuple[Array, NDArray[np.int64]]:
-    """Configurations along the geodesics ``a[e] -> b[e]`` (``a, b: (E, config_dim)``),
-    ``m_e = intervals(length_e, resolution)`` intervals each, both ends included: all the
-    configurations ``(sum(m_e + 1), config_dim)``, edge after edge, and ``m_e + 1`` per edge.
-
-    Planners check edges on this grid, the one :func:`pointplan.evaluation.check_path`
-    uses too, so a grazing contact cannot pass one check and fail the other."""
-    a = np.asarray(a, np.float64)
-    b = np.asarray(b, np.float64)
-    v = robot.log(a, b)
-    m = intervals(np.linalg.norm(v, axis=-1), resolution)
-    idx, frac = _grid(m)
-    return robot.integrate(a[idx], v[idx] * frac[:, None]), m + 1
 
 
 def check_free(robot: Robot, world: object, qs: Array, low: Array, high: Array) -> NDArray[np.bool_]:

@@ -4,9 +4,10 @@ Two trees grow from the start and the goal. Each iteration one tree *extends* on
 toward a uniform sample; the other tree then *connects*: it marches step by step toward the
 new node until it reaches it (a path) or is blocked. The trees swap roles every iteration.
 
-Every edge is at most ``step`` long in the robot's geodesic distance and is checked at
-configurations at most ``resolution`` apart, both ends included. A connect checks all its
-steps in one collision call. The solution is then shortcut: two points drawn uniformly by
+Every edge is at most ``step`` long in the robot's geodesic distance and is certified by
+the robot's motion validator in sub-steps of at most ``resolution``
+(:mod:`pointplan.robots.motion`: no configuration along it touches an obstacle). A connect
+checks all its steps in one validator call. The solution is then shortcut: two points drawn uniformly by
 arc length along the path are joined by a geodesic when that is free and shorter.
 
 Only the :class:`~pointplan.robots.base.Robot` API is used, so any robot works.
@@ -21,7 +22,8 @@ from numpy.typing import NDArray
 
 from ..robots.base import Robot
 from ..scenes.scene import Problem
-from .base import Array, PlanResult, check_free, edge_configs, march
+from ..robots.motion import segments_free
+from .base import Array, PlanResult, check_free, march
 
 _SAMPLE_BLOCK = 256
 
@@ -246,8 +248,8 @@ class BiRRT:
             qa, qb = robot.integrate(path[[i, j]], twists[[i, j]] * np.array([[fa], [fb]]))
             if float(robot.distance(qa, qb)) >= w - u - 1e-12:
                 continue
-            # The new path's segments, checked on the evaluator's grid (the pieces of the
-            # old segments too: their grid differs from the old segment's).
+            # The new path's segments, certified by the motion validator (the pieces of
+            # the old segments too: their sub-steps differ from the old segment's).
             verts = [path[i]]
             if (u - cum[i]) > 1e-9:
                 verts.append(qa)
@@ -255,9 +257,9 @@ class BiRRT:
                 verts.append(qb)
             verts.append(path[j + 1])
             va = np.stack(verts)
-            qs, _ = edge_configs(robot, va[:-1], va[1:], self.resolution)
-            checks += len(qs)
-            if not check_free(robot, scene.world, qs, scene.low, scene.high).all():
+            free, used = segments_free(robot, scene.world, va[:-1], va[1:], self.resolution, scene.low, scene.high)
+            checks += int(used.sum())
+            if not free.all():
                 continue
             path = np.concatenate([path[:i], va, path[j + 2 :]])
             twists = np.concatenate([twists[:i], robot.log(va[:-1], va[1:]), twists[j + 1 :]])

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry.collision import CollisionWorld
+from .motion import MotionCheck, check_motions
 
 Array = NDArray[np.float64]
 Bool = NDArray[np.bool_]
@@ -136,39 +137,109 @@ class Robot(ABC):
         bh = np.broadcast_to(self.parts.box_halfs, bc.shape)
         return sc, bc, br, bh
 
-    def collides(self, world: CollisionWorld, q: Array) -> Bool:
+    def collides(self, world: CollisionWorld, q: Array, radii: Array | None = None, halfs: Array | None = None) -> Bool:
         """Collision of configurations ``q: (*world.batch_shape, M, config_dim)`` or, for a
-        single-scene world, any ``(..., config_dim)``. Returns the batch of booleans."""
+        single-scene world, any ``(..., config_dim)``. Returns the batch of booleans.
+
+        ``radii: (..., Ps)`` and ``halfs: (..., Pb, d)`` (broadcasting against ``q``'s
+        batch) replace the sizes of the sphere and box parts: grown bodies, see
+        :meth:`grown_parts`."""
         q = np.asarray(q, np.float64)
         lead = q.shape[:-1]
+        ps, pb = len(self.parts.sphere_radii), len(self.parts.box_halfs)
+        rad = np.broadcast_to(self.parts.sphere_radii if radii is None else radii, lead + (ps,))
+        hal = np.broadcast_to(self.parts.box_halfs if halfs is None else halfs, lead + (pb, self.dim))
         if world.batch_shape == ():
             q = q.reshape(-1, self.config_dim)
-        sc, bc, br, bh = self.world_parts(q)
+            rad, hal = rad.reshape(q.shape[0], ps), hal.reshape(q.shape[0], pb, self.dim)
+        sc, bc, br, _ = self.world_parts(q)
         shape = q.shape[:-1]
         hit = np.zeros(shape, dtype=bool)
-        ps, pb = sc.shape[-2], bc.shape[-2]
         if ps:
             flat = sc.reshape(shape[:-1] + (shape[-1] * ps, self.dim))
-            rad = np.broadcast_to(self.parts.sphere_radii, shape + (ps,)).reshape(flat.shape[:-1])
-            hit |= world.spheres_collide(flat, rad).reshape(shape + (ps,)).any(-1)
+            hit |= world.spheres_collide(flat, rad.reshape(flat.shape[:-1])).reshape(shape + (ps,)).any(-1)
         if pb:
             d = self.dim
             hit |= (
                 world.boxes_collide(
                     bc.reshape(shape[:-1] + (shape[-1] * pb, d)),
                     br.reshape(shape[:-1] + (shape[-1] * pb, d, d)),
-                    bh.reshape(shape[:-1] + (shape[-1] * pb, d)),
+                    hal.reshape(shape[:-1] + (shape[-1] * pb, d)),
                 )
                 .reshape(shape + (pb,))
                 .any(-1)
             )
         return hit.reshape(lead) if world.batch_shape == () else hit
 
-    def segment_configs(self, q0: Array, q1: Array, resolution: float) -> Array:
-        """Configurations along the geodesic ``q0 -> q1`` every ``resolution`` at most,
-        both ends included: ``(K, config_dim)``."""
-        n = max(1, int(np.ceil(float(self.distance(q0, q1)) / resolution)))
-        return self.interpolate(np.asarray(q0)[None], np.asarray(q1)[None], np.linspace(0.0, 1.0, n + 1))
+    # -------------------------------------------------------------- certified motions
+    def grown_parts(self, seg: Array, reach: float) -> tuple[Array, Array]:
+        """Part sizes grown for motions by the body twist ``seg: (..., twist_dim)`` per
+        sub-step: sphere radii ``(..., Ps)`` and box half sides ``(..., Pb, d)``.
+
+        ``reach = 0.5``: the grown bodies at all the samples of a motion together contain
+        everything the body sweeps (each body point lies within the growth of its own
+        position at the nearest sample). ``reach = 1``: the grown body at sample 1 together
+        with the plain body at sample 0 contain everything swept during the first
+        sub-step. ``reach = 0``: the plain sizes. Proofs in ``docs/design.md``.
+
+        Robots that only translate: a sphere part of radius ``r`` moves on a straight line
+        and becomes ``sqrt(r^2 + (reach |v|)^2)``; a box part grows along each of its axes
+        by ``reach`` times the displacement's component along it. Free-flying 3D bodies
+        (twists ``(v, w)``): a body point ``p`` moves at the constant body-frame speed
+        ``|u(p)|``, ``u(p) = v + w x p``, its velocity direction turning at ``|w|``; within
+        ``reach`` of a sample it stays within ``reach |u_i| + reach^2 / 2 |w| |u|`` along any
+        unit axis ``i``, which is convex in ``p``, so the largest over a box is at a corner.
+        """
+        seg = np.asarray(seg, np.float64)
+        parts = self.parts
+        lead = seg.shape[:-1]
+        if self.twist_dim == self.dim:  # translation only: straight lines
+            v, w = seg, np.zeros(lead + (3,))
+            radii = np.sqrt(parts.sphere_radii**2 + (reach * reach) * np.sum(v * v, axis=-1)[..., None])
+        elif self.twist_dim == 6 and self.dim == 3:
+            v, w = seg[..., :3], seg[..., 3:]
+            radii = np.zeros(lead + (0,))
+            if len(parts.sphere_radii):
+                wn = np.linalg.norm(w, axis=-1)[..., None]
+                u = v[..., None, :] + np.cross(w[..., None, :], parts.sphere_centers)  # (..., Ps, 3)
+                radii = parts.sphere_radii + reach * (np.linalg.norm(u, axis=-1) + wn * parts.sphere_radii)
+        else:
+            raise NotImplementedError(f"no motion bound for {type(self).__name__}")
+        if not len(parts.box_halfs):
+            return radii, np.zeros(lead + (0, self.dim))
+        pb, d = parts.box_halfs.shape
+        local = (seg @ self._corner_velocity).reshape(lead + (pb, -1, d))  # u at the corners, part axes
+        speed = np.sqrt(np.sum(local * local, axis=-1))  # (..., Pb, 2^d): |u|, rotation-invariant
+        wn = np.sqrt(np.sum(w * w, axis=-1))[..., None, None]
+        growth = reach * np.abs(local) + ((0.5 * reach * reach) * wn * speed)[..., None]
+        return radii, parts.box_halfs + np.max(growth, axis=-2)
+
+    @property
+    def _corner_velocity(self) -> Array:
+        """``(twist_dim, Pb * 2^d * d)``: the twist's linear map to the velocities ``v + w x
+        p`` of the box parts' corners ``p``, in each part's own axes (computed once)."""
+        cached = self.__dict__.get("_corner_velocity_cache")
+        if cached is None:
+            p = self.parts
+            signs = np.array(np.meshgrid(*[[-1.0, 1.0]] * self.dim, indexing="ij")).reshape(self.dim, -1).T
+            corners = p.box_centers[:, None, :] + np.einsum("pij,pkj->pki", p.box_rotations, signs * p.box_halfs[:, None, :])
+            basis = np.eye(self.twist_dim)
+            rows = []
+            for e in basis:  # the velocity of each corner for a unit twist along e
+                if self.twist_dim == self.dim:
+                    u = np.broadcast_to(e, corners.shape)
+                else:
+                    u = e[:3] + np.cross(e[3:], corners)
+                rows.append(np.einsum("pij,pki->pkj", p.box_rotations, u).reshape(-1))
+            cached = self.__dict__["_corner_velocity_cache"] = np.array(rows)
+        return cached
+
+    def check_motions(
+        self, world: CollisionWorld, q0: Array, twist: Array, n: Array, low: Array | None = None, high: Array | None = None, fallback: Bool | None = None
+    ) -> MotionCheck:
+        """Certify motions ``q0 exp(s twist)`` in ``n`` sub-steps each: see
+        :func:`pointplan.robots.motion.check_motions`."""
+        return check_motions(self, world, q0, twist, n, low, high, fallback)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"

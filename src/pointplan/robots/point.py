@@ -46,11 +46,19 @@ class _Ball(Robot):
         # No rotation: a translation suffices.
         return points - np.asarray(q, np.float64)[..., None, :], normals
 
-    def collides(self, world, q):  # type: ignore[no-untyped-def]
+    def grown_parts(self, seg: Array, reach: float) -> tuple[Array, Array]:
+        # the base class's formula for a translating sphere, without the box-part work
+        seg = np.asarray(seg, np.float64)
+        r2 = self.radius * self.radius + (reach * reach) * np.einsum("...i,...i->...", seg, seg)
+        return np.sqrt(r2)[..., None], np.zeros(seg.shape[:-1] + (0, self.dim))
+
+    def collides(self, world, q, radii=None, halfs=None):  # type: ignore[no-untyped-def]
         q = np.asarray(q, np.float64)
+        r = self.radius if radii is None else np.asarray(radii, np.float64)[..., 0]
         if world.batch_shape == ():  # any leading shape, as in Robot.collides
-            return world.spheres_collide(q.reshape(-1, self.dim), self.radius).reshape(q.shape[:-1])
-        return world.spheres_collide(q, self.radius)
+            r = r if np.ndim(r) == 0 else np.broadcast_to(r, q.shape[:-1]).reshape(-1)
+            return world.spheres_collide(q.reshape(-1, self.dim), r).reshape(q.shape[:-1])
+        return world.spheres_collide(q, r)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(radius={self.radius})"
