@@ -3,10 +3,11 @@
     python benchmarks/bench_ray.py                      # 400 2D-Narrow problems, 2 workers
     python benchmarks/bench_ray.py --episodes 40 --train-steps 2000   # a quick look
 
-1. Evaluation: Bi-RRT on the 2D-Narrow test problems, serially and on ``--workers`` Ray
-   workers; checks that the records (metrics and paths) are identical apart from the
-   times, and prints the speed-up of the planning call, with and without the start-up of
-   Ray (which a long evaluation pays once).
+1. Evaluation: Bi-RRT on the test problems (2D-Narrow by default), serially and on
+   ``--workers`` Ray workers; checks that the records (metrics and paths) are identical
+   apart from the times, and prints the speed-up of the planning call: cold (the workers'
+   first task imports pointplan), warm (a second run), and with Ray's start-up (what a
+   fresh ``pointplan eval --workers`` pays once).
 2. Training: the same small SAC run (empty2d by default, the settings of
    ``docs/learning.md``) serially and with ``--workers`` rollout workers; prints the
    validation success at each evaluation (per environment step) and the environment
@@ -30,43 +31,46 @@ def load() -> str:
     return "load average %.2f %.2f %.2f on %d cores" % (*os.getloadavg(), os.cpu_count() or 0)
 
 
-def bench_eval(episodes: int, workers: int, seed: int) -> dict[str, float]:
+def bench_eval(env: str, robot_name: str | None, episodes: int, workers: int, seed: int, max_nodes: int) -> dict[str, float]:
     from pointplan.distributed import ScenarioProblems, connect
     from pointplan.evaluation import evaluate
     from pointplan.planners import make_planner
     from pointplan.scenes.scenarios import make_scenario
 
-    scenario = make_scenario("narrow2d")
+    scenario = make_scenario(env, robot=robot_name)
     robot = scenario.robot
     problems = scenario.problems("test", episodes, seed=seed)
     t0 = time.perf_counter()
-    serial = evaluate(make_planner("birrt", robot, seed=seed, max_nodes=20000), problems, robot, progress=False)
+    serial = evaluate(make_planner("birrt", robot, seed=seed, max_nodes=max_nodes), problems, robot, progress=False)
     t_serial = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     connect(workers)
     t_start = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    parallel = evaluate(make_planner("birrt", robot, seed=seed, max_nodes=20000), ScenarioProblems.of(scenario, "test", episodes, seed), robot, progress=False, workers=workers)
-    t_par = time.perf_counter() - t0
+    times = []
+    for _ in range(2):  # cold (the workers import pointplan on their first task), then warm
+        t0 = time.perf_counter()
+        parallel = evaluate(make_planner("birrt", robot, seed=seed, max_nodes=max_nodes), ScenarioProblems.of(scenario, "test", episodes, seed), robot, progress=False, workers=workers)
+        times.append(time.perf_counter() - t0)
 
     untimed = lambda m: {k: v for k, v in m.items() if not k.startswith("time")}  # noqa: E731
     same = untimed(serial.metrics()) == untimed(parallel.metrics()) and all(
         (a.tag, a.success, a.nodes, a.collision_checks) == (b.tag, b.success, b.nodes, b.collision_checks) and np.array_equal(a.path, b.path)
         for a, b in zip(serial.records, parallel.records, strict=True)
     )
-    print(f"eval: {episodes} narrow2d problems, Bi-RRT: serial {t_serial:.1f} s; {workers} workers {t_par:.1f} s (+ {t_start:.1f} s Ray start-up)")
-    print(f"      speed-up {t_serial / t_par:.2f}x (planning), {t_serial / (t_par + t_start):.2f}x (with start-up); identical metrics and paths: {same}")
-    return {"serial_s": t_serial, "parallel_s": t_par, "ray_start_s": t_start, "identical": float(same)}
+    cold, warm = times
+    print(f"eval: {episodes} {scenario.name} problems ({robot.name}), Bi-RRT: serial {t_serial:.1f} s; {workers} workers: {cold:.1f} s cold, {warm:.1f} s warm, Ray start-up {t_start:.1f} s")
+    print(f"      speed-up {t_serial / warm:.2f}x warm, {t_serial / cold:.2f}x cold, {t_serial / (cold + t_start):.2f}x with Ray's start-up (a fresh command); identical metrics and paths: {same}")
+    return {"serial_s": t_serial, "cold_s": cold, "warm_s": warm, "ray_start_s": t_start, "identical": float(same)}
 
 
-def bench_train(env: str, steps: int, workers: int) -> None:
+def bench_train(env: str, steps: int, workers: int, updates_per_step: float = 0.5) -> None:
     from pointplan.learning.train import TrainConfig, train
     from pointplan.models.actor_critic import NetConfig
     from pointplan.models.encoders import EncoderConfig
 
     net = NetConfig(EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True)
-    cfg = TrainConfig(env=env, total_steps=steps, num_envs=8, eval_every=max(steps // 6, 500), eval_episodes=100, updates_per_step=0.5, warmup_steps=500, net=net)
+    cfg = TrainConfig(env=env, total_steps=steps, num_envs=8, eval_every=max(steps // 6, 500), eval_episodes=100, updates_per_step=updates_per_step, warmup_steps=500, net=net)
     runs = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, w in (("serial", None), (f"{workers} workers", workers)):
@@ -74,7 +78,7 @@ def bench_train(env: str, steps: int, workers: int) -> None:
             res = train(cfg, os.path.join(tmp, name.replace(" ", "_")), progress=False, workers=w)
             total = time.perf_counter() - t0
             runs[name] = res
-            print(f"train {env}, {name}: {res.steps} env steps in {res.wall_time_s:.1f} s = {res.steps / res.wall_time_s:.0f} steps/s ({total:.1f} s with start-up), {res.history[-1]['updates']:.0f} updates")
+            print(f"train {env} ({updates_per_step} updates per step), {name}: {res.steps} env steps in {res.wall_time_s:.1f} s = {res.steps / res.wall_time_s:.0f} steps/s ({total:.1f} s with start-up), {res.history[-1]['updates']:.0f} updates")
     print("      validation success by env steps:")
     for name, res in runs.items():
         print(f"      {name:>10}: " + "  ".join(f"{int(r['env_steps'])}:{r['val_success']:.2f}" for r in res.history))
@@ -84,16 +88,20 @@ def bench_train(env: str, steps: int, workers: int) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--env", default="narrow2d", help="evaluation scenario (default: %(default)s)")
+    ap.add_argument("--robot", help="robot of a 3D scenario")
+    ap.add_argument("--max-nodes", type=int, default=20000)
     ap.add_argument("--episodes", type=int, default=400)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--train-env", default="empty2d")
     ap.add_argument("--train-steps", type=int, default=6000, help="0 skips the training part")
+    ap.add_argument("--train-updates-per-step", type=float, default=0.5, help="gradient steps per env step (default: %(default)s, as in docs/learning.md)")
     args = ap.parse_args()
     print(load())
-    bench_eval(args.episodes, args.workers, args.seed)
+    bench_eval(args.env, args.robot, args.episodes, args.workers, args.seed, args.max_nodes)
     if args.train_steps > 0:
-        bench_train(args.train_env, args.train_steps, args.workers)
+        bench_train(args.train_env, args.train_steps, args.workers, args.train_updates_per_step)
     print(load())
 
 
