@@ -91,7 +91,7 @@ def main() -> None:
     ap.add_argument("--env", default="narrow2d", help="evaluation scenario (default: %(default)s)")
     ap.add_argument("--robot", help="robot of a 3D scenario")
     ap.add_argument("--max-nodes", type=int, default=20000)
-    ap.add_argument("--episodes", type=int, default=400)
+    ap.add_argument("--episodes", type=int, default=400, help="0 skips the evaluation part")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--train-env", default="empty2d")
@@ -99,7 +99,8 @@ def main() -> None:
     ap.add_argument("--train-updates-per-step", type=float, default=0.5, help="gradient steps per env step (default: %(default)s, as in docs/learning.md)")
     args = ap.parse_args()
     print(load())
-    bench_eval(args.env, args.robot, args.episodes, args.workers, args.seed, args.max_nodes)
+    if args.episodes > 0:
+        bench_eval(args.env, args.robot, args.episodes, args.workers, args.seed, args.max_nodes)
     if args.train_steps > 0:
         bench_train(args.train_env, args.train_steps, args.workers, args.train_updates_per_step)
     print(load())

@@ -138,3 +138,29 @@ def test_without_ray_workers_say_how_to_install_it(monkeypatch: pytest.MonkeyPat
     assert main(["eval", "--episodes", "2", "--workers", "2", "--quiet"]) == 2
     assert "pip install 'pointplan[ray]'" in capsys.readouterr().err
     assert main(["eval", "--episodes", "2", "--quiet"]) == 0  # one process: as before
+
+
+def test_a_rollout_worker_that_dies_is_replaced(ray_local: object) -> None:
+    from pointplan.distributed.rollouts import RayRollouts
+    from pointplan.learning.sac import SAC
+    from pointplan.learning.train import TrainConfig
+    from pointplan.models.actor_critic import NetConfig
+    from pointplan.models.encoders import EncoderConfig
+
+    net = NetConfig(EncoderConfig(width=8, layers=1), head_width=8, head_layers=1, critic_action="pooled", shared_encoder=True)
+    cfg = TrainConfig(env="empty2d", num_envs=2, net=net)
+    rollouts = RayRollouts(cfg, workers=1, address=None, steps_per_call=60)
+    try:
+        from pointplan.envs.core import EnvConfig
+
+        scenario = make_scenario("empty2d")
+        agent = SAC(scenario.robot, EnvConfig(observation=cfg.observation, n_points=cfg.n_points), (cfg.n_points, 4), net, cfg.sac)
+        rollouts.sync(agent.actor, 0)
+        episodes, success, steps = rollouts.next_chunk(random_actions=False)
+        # 2 environments, 60 steps each: every one ended an episode (the horizon is 50)
+        assert steps == 120 and len(episodes) >= 2 and all(len(e) == 8 and len(e[0]) == len(e[2]) <= 50 for e in episodes)
+        ray.kill(rollouts.workers[0])  # (its next chunk was already asked for)
+        total = sum(rollouts.next_chunk(random_actions=True)[2] for _ in range(2))
+        assert total == 240 and rollouts.replaced == 1
+    finally:
+        rollouts.close()
