@@ -231,8 +231,10 @@ def _train(
     }
     pool = FailurePool(cfg.pool_size, cfg.pool_retries) if (cfg.retry_failures > 0 or cfg.mine_episodes > 0) else None
     source = EpisodeSource(core, pool, cfg.retry_failures)
-    source.reset(range(e), rng)
-    obs = core.observe(rng)["observation"]
+    obs: Any = None
+    if remote is None:  # (rollout workers start their own environments)
+        source.reset(range(e), rng)
+        obs = core.observe(rng)["observation"]
     recent: list[float] = []
     credit, last_losses = 0.0, {}
     t_start = time.perf_counter()
