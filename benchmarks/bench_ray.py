@@ -59,8 +59,11 @@ def bench_eval(env: str, robot_name: str | None, episodes: int, workers: int, se
         for a, b in zip(serial.records, parallel.records, strict=True)
     )
     cold, warm = times
+    busy = sum(r.time_s for r in parallel.records)
     print(f"eval: {episodes} {scenario.name} problems ({robot.name}), Bi-RRT: serial {t_serial:.1f} s; {workers} workers: {cold:.1f} s cold, {warm:.1f} s warm, Ray start-up {t_start:.1f} s")
     print(f"      speed-up {t_serial / warm:.2f}x warm, {t_serial / cold:.2f}x cold, {t_serial / (cold + t_start):.2f}x with Ray's start-up (a fresh command); identical metrics and paths: {same}")
+    # where the time goes: scheduling overhead (workers idle) or slower planning (CPU shared)
+    print(f"      warm run: workers planning {busy / warm:.2f} of {workers} on average; a problem took {busy / sum(r.time_s for r in serial.records):.2f}x its serial time")
     return {"serial_s": t_serial, "cold_s": cold, "warm_s": warm, "ray_start_s": t_start, "identical": float(same)}
 
 

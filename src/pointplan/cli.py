@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -372,6 +373,8 @@ def cmd_bc(args: argparse.Namespace) -> int:
             from .learning.dagger import config_from_dict
 
             dcfg = config_from_dict(load_checkpoint(args.resume)["dagger_config"], rounds=args.dagger_rounds or None)
+            # the Ray cluster is this command's, not the one the run started on
+            dcfg = dataclasses.replace(dcfg, bc=dataclasses.replace(dcfg.bc, address=args.address))
         summary = train_dagger(dcfg, args.run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume)
     else:
         summary = train_bc(cfg, args.run_dir, progress=not args.quiet)

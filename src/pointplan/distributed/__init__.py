@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import os
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
@@ -83,6 +84,10 @@ def connect(workers: int | None = None, address: str | None = None) -> Any:
         # the cluster's nodes must have pointplan installed (docs/scaling.md)
         ray.init(address=address, **kwargs)
     else:
+        # Ray runs its workers at niceness 15 by default, below every other job of a shared
+        # machine; the workers of a local Ray do this command's work, so they run at its
+        # priority, as the serial command would (set RAY_worker_niceness to choose another).
+        os.environ.setdefault("RAY_worker_niceness", "0")
         ray.init(num_cpus=int(workers) if workers else None, **kwargs)
     return ray
 

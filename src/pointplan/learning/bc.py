@@ -95,8 +95,6 @@ def demo_pool(workers: int, address: str | None = None) -> Any:
         return RayPool(workers if workers > 1 else None, address)
     if address:
         raise RuntimeError(RAY_MISSING)
-    import sys
-
     print(f"pointplan: planning in {workers} local processes; {RAY_MISSING.split(' (')[0]} to use Ray", file=sys.stderr)
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
