@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -131,17 +132,46 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from .evaluation import evaluate, format_table
 
     scenario = _scenario(args)
-    problems = scenario.problems("test", args.episodes, seed=args.seed)
+    problems = _test_problems(scenario, args, args.episodes)
     results: dict[str, dict[str, Any]] = {}
+    interrupted = None
     for name in args.planner.split(","):
         planner = _planner(name.strip(), scenario.robot, args, args.seed)
-        report = evaluate(planner, problems, scenario.robot, progress=not args.quiet)
+        report = evaluate(planner, problems, scenario.robot, progress=not args.quiet, **_scale(args))
         results[name.strip()] = report.metrics()
+        interrupted = getattr(report, "interrupted", None)
+        if interrupted:
+            break
     print(format_table(results))
     payload: dict[str, Any] = dict(next(iter(results.values()))) if len(results) == 1 else {"planners": results}
     payload.update({"env": scenario.name, "seed": args.seed})
+    if interrupted:
+        payload["interrupted"] = {"finished": interrupted[0], "problems": interrupted[1]}
     _write_json(args.json, payload)
-    return 0
+    return 130 if interrupted else 0
+
+
+def _scale(args: argparse.Namespace) -> dict[str, Any]:
+    """``workers`` and ``address`` for :func:`evaluate` (checked: Ray must be installed to
+    use them)."""
+    from .distributed import RAY_MISSING, ray_available, wants_ray
+
+    workers, address = getattr(args, "workers", None), getattr(args, "address", None)
+    if not wants_ray(workers, address):
+        return {}
+    if not ray_available():
+        raise CLIError(RAY_MISSING)
+    return {"workers": workers, "address": address}
+
+
+def _test_problems(scenario: Any, args: argparse.Namespace, n: int) -> Any:
+    """The first ``n`` test problems; on Ray workers a registered scenario's problems
+    travel as their recipe and are rebuilt by the workers (the same problems)."""
+    if _scale(args) and not getattr(scenario, "fixed", None) and not getattr(args, "scene", None):
+        from .distributed import ScenarioProblems
+
+        return ScenarioProblems.of(scenario, "test", n, seed=args.seed)
+    return scenario.problems("test", n, seed=args.seed)
 
 
 def _world_observation(problem: Any, robot: Any, observation: str, n_points: int | None, q: Any, t: int, seed: int) -> tuple[Any, Any]:
@@ -240,9 +270,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if getattr(scenario, "fixed", None):
         problems = scenario.fixed
     else:
-        problems = scenario.problems("test", args.episodes, seed=args.seed)
+        problems = _test_problems(scenario, args, args.episodes)
     planner = _planner(args.planner, scenario.robot, args, args.seed)
-    report = evaluate(planner, problems, scenario.robot, progress=not args.quiet)
+    report = evaluate(planner, problems, scenario.robot, progress=not args.quiet, **_scale(args))
     print(format_table({args.planner: report.metrics()}))
     if args.output:
         _draw_plan(args, scenario.robot, problems[0], report.records[0], planner)
@@ -250,7 +280,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
         paths = []
         for rec in report.records:
             paths.append({"success": bool(rec.success), "path": np.asarray(rec.path).tolist()})
-        _write_json(args.json, {"metrics": report.metrics(), "problems": paths})
+        out: dict[str, Any] = {"metrics": report.metrics(), "problems": paths}
+        if getattr(report, "interrupted", None):
+            out["interrupted"] = {"finished": report.interrupted[0], "problems": report.interrupted[1]}
+        _write_json(args.json, out)
+    if getattr(report, "interrupted", None):
+        return 130
     ok = all(check_path(scenario.robot, p, r.path) for p, r in zip(problems, report.records) if r.success)
     return 0 if ok else 1
 
@@ -377,9 +412,10 @@ def cmd_train(args: argparse.Namespace) -> int:
             retry_failures=args.retry_failures or 0.0,
             mine_episodes=args.mine_episodes or 0,
         )
-    res = train(cfg, args.run_dir, progress=not args.quiet, resume=args.resume)
+    scale = _scale(args)
+    res = train(cfg, args.run_dir, progress=not args.quiet, resume=args.resume, sync_every=args.sync_every, **scale)
     print(f"best validation success {res.best_success:.3f} after {res.steps} env steps, {res.wall_time_s:.0f} s; checkpoints in {res.run_dir}")
-    return 0
+    return 130 if getattr(res, "interrupted", False) else 0
 
 
 def cmd_bc(args: argparse.Namespace) -> int:
@@ -396,6 +432,7 @@ def cmd_bc(args: argparse.Namespace) -> int:
         device=args.device,
         net=_net_config(args),
         workers=args.workers,
+        address=args.address,
         demos_file=args.demos,
     )
     if args.dagger_rounds or args.resume:
@@ -407,6 +444,8 @@ def cmd_bc(args: argparse.Namespace) -> int:
             from .learning.dagger import config_from_dict
 
             dcfg = config_from_dict(load_checkpoint(args.resume)["dagger_config"], rounds=args.dagger_rounds or None)
+            # the Ray cluster is this command's, not the one the run started on
+            dcfg = dataclasses.replace(dcfg, bc=dataclasses.replace(dcfg.bc, address=args.address))
         summary = train_dagger(dcfg, args.run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume)
     else:
         summary = train_bc(cfg, args.run_dir, progress=not args.quiet)
@@ -457,6 +496,11 @@ def _add_net(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true")
 
 
+def _add_scale(p: argparse.ArgumentParser, what: str = "problems are planned by") -> None:
+    p.add_argument("--workers", type=int, default=None, help=f"{what} this many Ray workers on this machine (pip install 'pointplan[ray]'; default: one process); results equal a serial run's")
+    p.add_argument("--address", help="an existing Ray cluster to run the workers on (e.g. auto, or ray://head:10001; see docs/scaling.md)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
@@ -469,6 +513,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=int, default=400, help="number of test problems (default: %(default)s)")
     p.add_argument("--json", help="write the metrics to this file")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_scale(p)
     p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("render", help="draw a problem, its observation and a planner's path")
@@ -495,6 +540,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", help="draw the first problem to this PNG")
     p.add_argument("--json", help="write metrics and paths to this file")
     p.add_argument("--quiet", action="store_true")
+    _add_scale(p)
     p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser("train", help="train a policy with SAC + HER")
@@ -514,13 +560,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--retry-failures", type=float, help="share of new episodes that retry a problem the policy failed (default: 0, off; e.g. 0.25)")
     p.add_argument("--mine-episodes", type=int, help="fresh training problems the deterministic policy attempts at each validation; its failures are retried (default: 0)")
     p.add_argument("--resume", help="continue a run from its last.pt")
+    p.add_argument("--workers", type=int, default=None, help="Ray rollout workers stepping the --num-envs environments (shared out among them) while this process learns (pip install 'pointplan[ray]'; default: one process)")
+    p.add_argument("--address", help="an existing Ray cluster to run the rollout workers on (see docs/scaling.md)")
+    p.add_argument("--sync-every", type=int, help="with --workers: learner updates between two broadcasts of the actor's weights (default: 16)")
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("bc", help="behavioural cloning from Bi-RRT demonstrations")
     _add_net(p)
     p.add_argument("--problems", type=int, default=2000, help="demonstration problems (default: %(default)s)")
     p.add_argument("--epochs", type=int, default=30)
-    p.add_argument("--workers", type=int, default=1, help="processes planning the demonstrations (default: %(default)s)")
+    p.add_argument("--workers", type=int, default=1, help="Ray workers planning the demonstrations (local processes without Ray; default: %(default)s); the demonstrations equal a serial run's")
+    p.add_argument("--address", help="an existing Ray cluster to plan the demonstrations on (see docs/scaling.md)")
     p.add_argument("--demos", help="demonstrations file (.npz): reused if it exists, written after planning otherwise")
     p.add_argument("--dagger-rounds", type=int, default=0, help="DAgger rounds after cloning: the policy's failed rollouts labelled by Bi-RRT (default: 0, off)")
     p.add_argument("--rollouts", type=int, default=400, help="DAgger: training problems attempted per round (default: %(default)s)")

@@ -212,8 +212,20 @@ def evaluate(
     progress: bool = True,
     resolution: float = 0.01,
     tolerance: float = 0.07,
+    workers: int | None = None,
+    address: str | None = None,
 ) -> EvalReport:
-    """Plan every problem with ``planner`` and re-check each returned path."""
+    """Plan every problem with ``planner`` and re-check each returned path.
+
+    With ``workers > 1`` or a Ray cluster ``address`` the problems are planned by Ray
+    workers (:func:`pointplan.distributed.evaluate_parallel`): the same records in the
+    same order, wall times aside."""
+    from ..distributed import wants_ray
+
+    if wants_ray(workers, address):
+        from ..distributed import evaluate_parallel
+
+        return evaluate_parallel(planner, problems, robot, progress, resolution, tolerance, workers, address)  # type: ignore[no-any-return]
     report = EvalReport(planner=str(getattr(planner, "name", type(planner).__name__)))
     it: Any = problems
     if progress:

@@ -8,6 +8,7 @@ The actor's mean action (after the tanh) is fitted to it with an L2 loss.
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -82,10 +83,19 @@ def _single_thread() -> None:
     torch.set_num_threads(1)
 
 
-def demo_pool(workers: int) -> Any:
-    """A process pool for :func:`plan_demos` (``None`` for ``workers <= 1``)."""
-    if workers <= 1:
+def demo_pool(workers: int, address: str | None = None) -> Any:
+    """A pool for :func:`plan_demos`: Ray workers when Ray is installed
+    (:class:`pointplan.distributed.RayPool`; ``address`` joins a cluster), else a process
+    pool; ``None`` for one worker and no address."""
+    from ..distributed import RAY_MISSING, RayPool, ray_available, wants_ray
+
+    if not wants_ray(workers, address):
         return None
+    if ray_available():
+        return RayPool(workers if workers > 1 else None, address)
+    if address:
+        raise RuntimeError(RAY_MISSING)
+    print(f"pointplan: planning in {workers} local processes; {RAY_MISSING.split(' (')[0]} to use Ray", file=sys.stderr)
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
@@ -101,7 +111,22 @@ def plan_demos(jobs: list[DemoJob], pool: Any = None, progress: bool = True, des
 
         bar = tqdm(total=len(jobs), desc=desc, unit="problem")
     out: list[tuple[int, np.ndarray]] = []
-    results = pool.map(_plan_demo, jobs, chunksize=8) if pool is not None else map(_plan_demo, jobs)
+    from ..distributed import Interrupted, RayPool
+
+    if isinstance(pool, RayPool):
+        # results come back in job order; Ctrl-C keeps the demonstrations that finished
+        ray_bar = bar
+        bar = None  # advanced as results arrive, not in the loop below
+        try:
+            results: Any = pool.map(_plan_demo, jobs, on_result=lambda *_: ray_bar.update() if ray_bar is not None else None)
+        except Interrupted as stop:
+            results = [stop.results[i] for i in sorted(stop.results)]
+            print(f"\ninterrupted: keeping the {len(results)} of {len(jobs)} demonstrations that finished", file=sys.stderr)
+        finally:
+            if ray_bar is not None:
+                ray_bar.close()
+    else:
+        results = pool.map(_plan_demo, jobs, chunksize=8) if pool is not None else map(_plan_demo, jobs)
     for index, path in results:
         if path is not None and len(path) > 1:
             out.append((index, path))
@@ -120,13 +145,14 @@ def generate_demos(
     progress: bool = True,
     split: str = "train",
     workers: int = 1,
+    address: str | None = None,
 ) -> Demos:
     """Plan ``n_problems`` training problems with Bi-RRT and cut the paths into steps
-    (``workers`` processes)."""
+    (``workers`` Ray workers or processes, see :func:`demo_pool`)."""
     robot_name = scenario.robot.name if scenario.robot.dim == 3 else None
     index = [_demo_index(seed, n_problems, i) for i in range(n_problems)]
     jobs: list[DemoJob] = [(scenario.name, robot_name, split, k, seed, seed * 7_919 + k, max_nodes, None) for k in index]
-    pool = demo_pool(workers)
+    pool = demo_pool(workers, address)
     try:
         paths = plan_demos(jobs, pool, progress)
     finally:
@@ -210,8 +236,10 @@ class BCConfig:
     #: draw new observation subsets every this many epochs (0: never)
     refresh_every: int = 5
     net: NetConfig = field(default_factory=lambda: NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True))
-    #: processes planning the demonstrations
+    #: workers planning the demonstrations (Ray when installed, else processes)
     workers: int = 1
+    #: a Ray cluster to plan the demonstrations on
+    address: str | None = None
     #: a file of demonstrations: loaded if it exists, written after planning otherwise
     demos_file: str | None = None
 
@@ -229,7 +257,7 @@ def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: D
     if demos is None and cfg.demos_file and Path(cfg.demos_file).exists():
         demos = load_demos(cfg.demos_file, scenario)
     if demos is None:
-        demos = generate_demos(scenario, cfg.n_problems, cfg.seed, progress=progress, workers=cfg.workers)
+        demos = generate_demos(scenario, cfg.n_problems, cfg.seed, progress=progress, workers=cfg.workers, address=cfg.address)
         if cfg.demos_file:
             save_demos(cfg.demos_file, scenario, demos, "train", cfg.seed)
     t_demos = time.perf_counter() - t0

@@ -131,7 +131,7 @@ def train_dagger(cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, 
         demos = load_demos(demos_path, scenario)
     else:
         source = b.demos_file if b.demos_file and Path(b.demos_file).exists() else None
-        demos = load_demos(source, scenario) if source else generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers)
+        demos = load_demos(source, scenario) if source else generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address)
         save_demos(demos_path, scenario, demos, "train", b.seed)
         if init_actor:
             actor.load_state_dict(load_checkpoint(init_actor, b.device)["actor"])
@@ -140,7 +140,7 @@ def train_dagger(cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, 
     policy = Policy(actor, robot, {"observation": b.observation, "n_points": b.n_points}, b.device)
     val_problems = scenario.problems("val", cfg.eval_episodes, seed=b.seed)
     log = _Log(run_dir / "metrics.csv")
-    pool = demo_pool(b.workers)
+    pool = demo_pool(b.workers, b.address)
     t0 = time.perf_counter()
     try:
         for rnd in range(start_round, cfg.rounds):

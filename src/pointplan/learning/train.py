@@ -84,6 +84,8 @@ class TrainResult:
     steps: int
     wall_time_s: float
     history: list[dict[str, float]]
+    #: stopped by Ctrl-C (training on Ray workers), after a last validation and checkpoint
+    interrupted: bool = False
 
 
 class _Logger:
@@ -145,8 +147,42 @@ def train(
     progress: bool = True,
     resume: str | Path | None = None,
     on_eval: Callable[[dict[str, float]], None] | None = None,
+    workers: int | None = None,
+    address: str | None = None,
+    sync_every: int | None = None,
 ) -> TrainResult:
-    """Train a policy with SAC + HER; returns where the checkpoints are and the history."""
+    """Train a policy with SAC + HER; returns where the checkpoints are and the history.
+
+    With ``workers > 1`` or a Ray cluster ``address``, Ray rollout workers step the
+    ``num_envs`` environments (shared out among them) and this process learns from the
+    episodes they send, broadcasting the actor every ``sync_every`` updates
+    (``pointplan.distributed.rollouts``)."""
+    from ..distributed import wants_ray
+
+    remote = None
+    if wants_ray(workers, address):
+        if cfg.retry_failures > 0:
+            raise ValueError("--retry-failures runs in one process for now: drop --workers/--address to use it")
+        from ..distributed.rollouts import SYNC_EVERY, RayRollouts
+
+        remote = RayRollouts(cfg, workers, address, sync_every or SYNC_EVERY)
+    try:
+        res = _train(cfg, run_dir, progress, resume, on_eval, remote)
+        res.interrupted = bool(remote is not None and remote.interrupted)
+        return res
+    finally:
+        if remote is not None:
+            remote.close()
+
+
+def _train(
+    cfg: TrainConfig,
+    run_dir: str | Path,
+    progress: bool,
+    resume: str | Path | None,
+    on_eval: Callable[[dict[str, float]], None] | None,
+    remote: Any,
+) -> TrainResult:
     from ..planners.policy import rollout_batch
 
     run_dir = Path(run_dir)
@@ -195,8 +231,10 @@ def train(
     }
     pool = FailurePool(cfg.pool_size, cfg.pool_retries) if (cfg.retry_failures > 0 or cfg.mine_episodes > 0) else None
     source = EpisodeSource(core, pool, cfg.retry_failures)
-    source.reset(range(e), rng)
-    obs = core.observe(rng)["observation"]
+    obs: Any = None
+    if remote is None:  # (rollout workers start their own environments)
+        source.reset(range(e), rng)
+        obs = core.observe(rng)["observation"]
     recent: list[float] = []
     credit, last_losses = 0.0, {}
     t_start = time.perf_counter()
@@ -209,40 +247,50 @@ def train(
     history: list[dict[str, float]] = []
     rows = np.arange(e)
     while steps < cfg.total_steps:
-        q, goal = core.q.copy(), core.goal.copy()
-        if steps < cfg.warmup_steps and cfg.init_actor is None:
-            actions = rng.uniform(-1.0, 1.0, (e, robot.twist_dim)).astype(np.float32)
+        stop_now = remote is not None and remote.interrupted
+        if remote is not None:  # Ray rollout workers step the environments
+            remote.sync(agent.actor, agent.updates)
+            episodes, succ, collected = remote.next_chunk(random_actions=steps < cfg.warmup_steps and cfg.init_actor is None)
+            for episode in episodes:
+                buffer.add_episode(*episode)
+            recent = (recent + succ)[-200:]
+            steps += collected
         else:
-            actions = agent.act(obs, q, goal)
-        t_idx = core.t.copy()
-        _, term, trunc, info = core.step(actions)
-        next_obs = core.observe(rng)["observation"]
-        for k, v in (("obs", obs), ("next_obs", next_obs), ("q", q), ("q_next", core.q), ("goal", goal), ("action", actions), ("action_norm", info["action_norm"]), ("collided", info["collided"])):
-            st[k][rows, t_idx] = v
-        done = term | trunc
-        steps += e
-        if done.any():
-            for i in np.flatnonzero(done):
-                n = int(t_idx[i]) + 1
-                buffer.add_episode(*(st[k][i, :n] for k in ("obs", "next_obs", "q", "q_next", "goal", "action", "action_norm", "collided")))
-                if not source.is_retry(i):  # the success rate of fresh problems only
-                    recent.append(float(term[i]))
-                source.ended(i, bool(term[i]))
-            recent = recent[-200:]
-            source.reset(np.flatnonzero(done).tolist(), rng)
-            fresh = core.observe(rng)["observation"]
-            next_obs = np.where(done.reshape((-1,) + (1,) * len(obs_shape)), fresh, next_obs)
-        obs = next_obs
+            collected = e
+            q, goal = core.q.copy(), core.goal.copy()
+            if steps < cfg.warmup_steps and cfg.init_actor is None:
+                actions = rng.uniform(-1.0, 1.0, (e, robot.twist_dim)).astype(np.float32)
+            else:
+                actions = agent.act(obs, q, goal)
+            t_idx = core.t.copy()
+            _, term, trunc, info = core.step(actions)
+            next_obs = core.observe(rng)["observation"]
+            for k, v in (("obs", obs), ("next_obs", next_obs), ("q", q), ("q_next", core.q), ("goal", goal), ("action", actions), ("action_norm", info["action_norm"]), ("collided", info["collided"])):
+                st[k][rows, t_idx] = v
+            done = term | trunc
+            steps += e
+            if done.any():
+                for i in np.flatnonzero(done):
+                    n = int(t_idx[i]) + 1
+                    buffer.add_episode(*(st[k][i, :n] for k in ("obs", "next_obs", "q", "q_next", "goal", "action", "action_norm", "collided")))
+                    if not source.is_retry(i):  # the success rate of fresh problems only
+                        recent.append(float(term[i]))
+                    source.ended(i, bool(term[i]))
+                recent = recent[-200:]
+                source.reset(np.flatnonzero(done).tolist(), rng)
+                fresh = core.observe(rng)["observation"]
+                next_obs = np.where(done.reshape((-1,) + (1,) * len(obs_shape)), fresh, next_obs)
+            obs = next_obs
         if steps >= cfg.warmup_steps and len(buffer) >= cfg.sac.batch_size:
-            credit += e * cfg.updates_per_step
+            credit += collected * cfg.updates_per_step
             while credit >= 1.0:
                 last_losses = agent.update(buffer.sample(cfg.sac.batch_size, rng, cfg.sac.her_ratio))
                 credit -= 1.0
         if bar is not None:
-            bar.update(e)
+            bar.update(collected)
             if recent:
                 bar.set_postfix(train_success=f"{np.mean(recent):.2f}", best_val=f"{max(best, 0):.3f}", updates=agent.updates)
-        if steps >= next_eval or steps >= cfg.total_steps:
+        if steps >= next_eval or steps >= cfg.total_steps or stop_now:
             next_eval += cfg.eval_every
             agent.actor.eval()
 
@@ -302,7 +350,7 @@ def train(
                 save_checkpoint(run_dir / "best.pt", _checkpoint_payload(cfg, agent, obs_shape, robot.name, extra))
             if bar is not None:
                 bar.write(f"step {steps}: val success {val:.3f} (best {best:.3f}), {wall:.0f} s")
-            if val >= cfg.target_success:
+            if val >= cfg.target_success or stop_now:
                 break
     if bar is not None:
         bar.close()
