@@ -103,6 +103,9 @@ class Empty2DScenario(Scenario):
 
 
 SCENARIOS: dict[str, type[Scenario]] = {"narrow2d": Narrow2DScenario, "empty2d": Empty2DScenario}
+from .narrow2d_variants import VARIANT_SCENARIOS  # noqa: E402  (narrow2d-ends, -many, -narrow, -manynarrow)
+
+SCENARIOS.update(VARIANT_SCENARIOS)
 
 
 def scenario_names() -> list[str]:
