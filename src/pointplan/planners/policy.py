@@ -185,6 +185,12 @@ class PolicyPlanner:
     paths at the goal when the last edge is free (default). ``info["time_split"]`` of a
     ``plan`` result has the seconds spent observing, in the network and in motion checks.
 
+    ``observer_wrapper``: a function ``observer -> observer`` applied to the observer of
+    ``plan`` (e.g. :func:`pointplan.observers.perturb.perturbation`: noisy, dropped or
+    occluded points, farthest-point subsets); static scenes only. ``draws``: the action at
+    each step is the mean of the actions for ``draws`` independent random point subsets
+    (``draws`` network passes per step; 1, the default, is the plain policy).
+
     A PointNet actor is copied to numpy when the planner is made (later changes to the
     policy's weights are not seen; make a new planner). Scenes with moving obstacles and
     image observations go through ``rollout_batch`` (PyTorch on one thread), which runs to
@@ -203,6 +209,8 @@ class PolicyPlanner:
         stall_distance: float = 0.035,
         connect_goal: bool = True,
         seed: int = 0,
+        observer_wrapper: Callable[[Any], Any] | None = None,
+        draws: int = 1,
     ) -> None:
         from ..models.policy import Policy
 
@@ -221,6 +229,8 @@ class PolicyPlanner:
         self.stall_distance = float(stall_distance)
         self.connect_goal = bool(connect_goal)
         self.seed = int(seed)
+        self.observer_wrapper = observer_wrapper
+        self.draws = max(1, int(draws))
         #: the network as numpy arrays (weights as of now), or None: PyTorch on one thread
         self.fast = policy.fast_actor()
         self._observer: Any = None
@@ -229,10 +239,12 @@ class PolicyPlanner:
 
     def plan(self, problem: Problem) -> PlanResult:
         if problem.scene.dynamic:
+            if self.observer_wrapper is not None or self.draws > 1:
+                raise ValueError("observer_wrapper and draws > 1 plan static scenes only")
             return self._plan_batched(problem)
         if self._observer is None:
             probe = BatchedCore(_GivenProblems(self.robot, self.horizon), 1, replace(self.env, horizon=self.horizon))
-            self._observer = probe.observer
+            self._observer = probe.observer if self.observer_wrapper is None else self.observer_wrapper(probe.observer)
         if not isinstance(self._observer, PointSetObserver) or type(self._observer).observe is not PointSetObserver.observe:
             return self._plan_batched(problem)
         return self._rollout_one(problem)
@@ -312,6 +324,7 @@ class PolicyPlanner:
         observer = self._observer
         observer.set_scene(0, scene)
         per_step = observer.draws_one()
+        k_draws = self.draws
         lean = self._lean_step()
         world, low1, high1 = scene.world, scene.low[None], scene.high[None]
         goal = np.asarray(problem.goal, np.float64)
@@ -333,15 +346,19 @@ class PolicyPlanner:
                 qs, twists, dists = [q], [], []
                 qq = q
                 for s in range(t, horizon):
-                    u = self._uniforms((s + 1) * per_step)[s * per_step : (s + 1) * per_step]
+                    blk = per_step * k_draws
+                    u = self._uniforms((s + 1) * blk)[s * blk : (s + 1) * blk]
                     ta = time.perf_counter()
                     if lean is not None:  # observation and network in one (timed as network)
                         tb = ta
-                        a = lean(qq, goal, u)
-                    else:
+                        a = lean(qq, goal, u) if k_draws == 1 else np.mean([lean(qq, goal, u[j * per_step : (j + 1) * per_step]) for j in range(k_draws)], 0)
+                    elif k_draws == 1:
                         obs = observer.observe_one(qq, u=u)
                         tb = time.perf_counter()
                         a = self._act(obs, qq, goal)
+                    else:  # observing and acting interleaved: timed as network
+                        tb = ta
+                        a = np.mean([self._act(observer.observe_one(qq, u=u[j * per_step : (j + 1) * per_step]), qq, goal) for j in range(k_draws)], 0)
                     tc = time.perf_counter()
                     tw = np.clip(a, -1.0, 1.0) * scale  # float64, as the env computes it
                     qq = _free_move_end(robot, qq, tw, scene.low, scene.high, clip_target)
@@ -390,5 +407,8 @@ class PolicyPlanner:
         return res
 
     def plan_many(self, problems: Sequence[Problem]) -> list[PlanResult]:
-        """All problems at once (much faster than one by one)."""
+        """All problems at once (much faster than one by one; one by one with an
+        ``observer_wrapper`` or ``draws > 1``)."""
+        if self.observer_wrapper is not None or self.draws > 1:
+            return [self.plan(p) for p in problems]
         return rollout_batch(self.policy, self.robot, self.env, problems, self.horizon, self.seed, connect_goal=self.connect_goal)
