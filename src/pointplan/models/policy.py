@@ -161,6 +161,8 @@ class NumpyPointNetActor:
 #: in the paper.
 SHIPPED: dict[tuple[str, str], str] = {
     ("disc2d", "surface-normals"): "narrow2d_policy.pt",
+    ("sphere3d", "local"): "sphere3d_local_policy.pt",
+    ("sphere3d", "global"): "sphere3d_global_policy.pt",
 }
 #: the observation a robot's policy uses when none is asked for
 DEFAULT_OBSERVATION = {"disc2d": "surface-normals", "sphere3d": "global", "sshape": "local"}
@@ -178,7 +180,10 @@ def shipped_checkpoint(robot: str = "disc2d", observation: str | None = None) ->
     docs/results.md for how each was trained and what it scores)."""
     from importlib.resources import files
 
-    observation = observation or DEFAULT_OBSERVATION.get(robot, "")
+    if observation is None:  # the robot's usual observation, else any that ships for it
+        have = [o for r, o in shipped_policies() if r == robot]
+        default = DEFAULT_OBSERVATION.get(robot, "")
+        observation = default if default in have or not have else have[0]
     name = SHIPPED.get((robot, observation))
     path = Path(str(files("pointplan") / "data" / name)) if name else None
     if path is None or not path.is_file():
