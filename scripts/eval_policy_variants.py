@@ -24,7 +24,7 @@ import torch
 
 from pointplan.envs.core import EnvConfig
 from pointplan.evaluation.evaluate import check_path
-from pointplan.learning.checkpoint import load_checkpoint
+from pointplan.models.checkpoint import load_checkpoint
 from pointplan.models.policy import Policy, shipped_checkpoint
 from pointplan.planners.policy import rollout_batch
 from pointplan.scenes.scenarios import make_scenario

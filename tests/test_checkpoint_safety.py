@@ -18,8 +18,8 @@ import torch
 import pointplan
 from pointplan.cli import main
 from pointplan.envs.core import EnvConfig
-from pointplan.learning.checkpoint import FORMAT, VERSION, CheckpointError, find_non_plain, load_checkpoint, save_checkpoint, to_dict
-from pointplan.learning.convert import convert_checkpoint
+from pointplan.models.checkpoint import FORMAT, VERSION, CheckpointError, find_non_plain, load_checkpoint, save_checkpoint, to_dict
+from pointplan.models.convert import convert_checkpoint
 from pointplan.learning.replay import EpisodeReplay
 from pointplan.learning.sac import SAC, SACConfig
 from pointplan.learning.train import TrainConfig, train
@@ -279,5 +279,5 @@ def test_only_the_conversion_unpickles() -> None:
         found = [line.strip() for line in py.read_text().splitlines() if risky.search(line)]
         if found:
             hits[py.relative_to(SRC).as_posix()] = found
-    assert list(hits) == ["pointplan/learning/convert.py"], hits
-    assert all("weights_only=False" in line for line in hits["pointplan/learning/convert.py"])
+    assert list(hits) == ["pointplan/models/convert.py"], hits
+    assert all("weights_only=False" in line for line in hits["pointplan/models/convert.py"])

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from pointplan.learning.bc import BCConfig, generate_demos, load_demos, save_demos
-from pointplan.learning.checkpoint import load_checkpoint
+from pointplan.models.checkpoint import load_checkpoint
 from pointplan.learning.dagger import DaggerConfig, config_from_dict, train_dagger
 from pointplan.models.actor_critic import NetConfig
 from pointplan.models.encoders import EncoderConfig

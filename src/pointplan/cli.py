@@ -174,21 +174,9 @@ def _test_problems(scenario: Any, args: argparse.Namespace, n: int) -> Any:
     return scenario.problems("test", n, seed=args.seed)
 
 
-def _world_observation(problem: Any, robot: Any, observation: str, n_points: int | None, q: Any, t: int, seed: int) -> tuple[Any, Any]:
-    """What the robot at ``q`` (time ``t``) observes, back in the world frame (3D)."""
-    import numpy as np
-
-    from .observers import make_observer
-
-    observer = make_observer(observation, robot, **({"n_points": n_points} if n_points else {}))
-    observer.bind([problem.scene])
-    obs = observer.observe(np.asarray(q, np.float64)[None], np.random.default_rng(seed), np.array([t]))[0]
-    rot, pos = robot.rotations(np.asarray(q, np.float64)), robot.positions(np.asarray(q, np.float64))
-    keep = np.any(obs != 0.0, axis=1)
-    return obs[keep, :3] @ rot.T + pos, obs[keep, 3:6] @ rot.T
-
-
 def cmd_render(args: argparse.Namespace) -> int:
+    from .observers import world_observation
+
     scenario = _scenario(args)
     problem = scenario.problem("test", args.seed, seed=0)
     result = None
@@ -211,7 +199,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     if observation not in ("global", "local"):
         raise CLIError(f"3D scenes are observed as 'global' or 'local', not {observation!r}")
     path = result.path if result is not None and len(result.path) else None
-    pts, nrm = _world_observation(problem, robot, observation, args.n_points, problem.start, 0, args.seed)
+    pts, nrm = world_observation(problem, robot, observation, args.n_points, problem.start, 0, args.seed)
     title = f"{problem.tag}  ({observation} observation)"
     render_problem_3d(problem, robot, path=path, points=pts, normals=nrm, output=args.output, title=title, obstacles=problem.scene.obstacles_at(0))
     print(f"wrote {args.output}")
@@ -226,7 +214,7 @@ def cmd_render(args: argparse.Namespace) -> int:
             timed,
             args.gif,
             obstacles_at=scene.obstacles_at if scene.dynamic else None,
-            points_at=lambda t: _world_observation(problem, robot, observation, args.n_points, timed[t], t, args.seed)[0],
+            points_at=lambda t: world_observation(problem, robot, observation, args.n_points, timed[t], t, args.seed)[0],
         )
         print(f"wrote {args.gif} ({len(timed)} frames, one per time step)")
     return 0
@@ -240,6 +228,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     if importlib.util.find_spec("viser") is None:
         raise CLIError(VIEWER_MISSING)  # before any planning
     from .evaluation.evaluate import timed_path
+    from .observers import world_observation
     from .viz.viewer import view_problem
 
     scenario = _scenario(args)
@@ -257,7 +246,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         timed = timed_path(robot, path) if path is not None else problem.start[None]
 
         def points_at(t: int) -> Any:
-            return _world_observation(problem, robot, args.observation, args.n_points, timed[t], t, args.seed)[0]
+            return world_observation(problem, robot, args.observation, args.n_points, timed[t], t, args.seed)[0]
 
     view_problem(problem, robot, path=path, points_at=points_at, port=args.port, host=args.host)
     return 0
@@ -380,7 +369,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from .learning.train import TrainConfig, config_from_dict, train
 
     if args.resume:
-        from .learning.checkpoint import load_checkpoint
+        from .models.checkpoint import load_checkpoint
 
         cfg = config_from_dict(load_checkpoint(args.resume)["train_config"])
         # settings given on the command line override the run's own; the networks cannot change
@@ -440,7 +429,7 @@ def cmd_bc(args: argparse.Namespace) -> int:
 
         dcfg = DaggerConfig(cfg, rounds=args.dagger_rounds, rollouts=args.rollouts, epochs_per_round=args.epochs_per_round, eval_episodes=args.eval_episodes)
         if args.resume:
-            from .learning.checkpoint import load_checkpoint
+            from .models.checkpoint import load_checkpoint
             from .learning.dagger import config_from_dict
 
             dcfg = config_from_dict(load_checkpoint(args.resume)["dagger_config"], rounds=args.dagger_rounds or None)
@@ -464,8 +453,8 @@ def _default_points(args: argparse.Namespace) -> int:
 
 
 def cmd_convert_checkpoint(args: argparse.Namespace) -> int:
-    from .learning.checkpoint import VERSION
-    from .learning.convert import convert_checkpoint
+    from .models.checkpoint import VERSION
+    from .models.convert import convert_checkpoint
 
     print(
         f"pointplan: warning: convert-checkpoint fully unpickles {args.old}, which runs any code stored in it; "

@@ -129,7 +129,7 @@ class RayRollouts:
     workers; a second Ctrl-C interrupts at once."""
 
     def __init__(self, cfg: Any, workers: int | None, address: str | None, sync_every: int = SYNC_EVERY, steps_per_call: int = STEPS_PER_CALL) -> None:
-        from ..learning.checkpoint import to_dict
+        from ..models.checkpoint import to_dict
         from . import cluster_cpus, connect
 
         ray = connect(workers, address)

@@ -16,10 +16,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..robots.motion import intervals
-from .clearance import Clearance, advance
+from ..planners.base import path_length
 from ..robots.base import Robot
+from ..robots.motion import intervals
 from ..scenes.scene import Problem
+from .clearance import Clearance, advance
 
 Array = NDArray[np.float64]
 
@@ -136,14 +137,6 @@ def densify(robot: Robot, path: Array, resolution: float) -> Array:
     idx = np.repeat(np.arange(len(m)), counts)
     s = (np.arange(offsets[-1]) - offsets[idx]) / m[idx]
     return robot.integrate(q0[idx], v[idx] * s[:, None])
-
-
-def path_length(robot: Robot, path: Array) -> float:
-    """Sum of geodesic distances between consecutive configurations."""
-    path = np.asarray(path, np.float64)
-    if len(path) < 2:
-        return 0.0
-    return float(np.sum(robot.distance(path[:-1], path[1:])))
 
 
 @dataclass

@@ -25,7 +25,7 @@ from ..observers import make_observer
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Problem
-from .checkpoint import save_checkpoint, to_dict
+from ..models.checkpoint import save_checkpoint, to_dict
 
 
 @dataclass

@@ -39,7 +39,7 @@ from .bc import (
     policy_payload,
     save_demos,
 )
-from .checkpoint import load_checkpoint, save_checkpoint, to_dict
+from ..models.checkpoint import load_checkpoint, save_checkpoint, to_dict
 
 
 @dataclass(frozen=True)

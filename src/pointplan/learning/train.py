@@ -24,7 +24,7 @@ from ..models.actor_critic import NetConfig
 from ..models.encoders import EncoderConfig
 from ..scenes.scenarios import make_scenario
 from ..scenes.scene import Problem
-from .checkpoint import load_checkpoint, save_checkpoint, to_dict
+from ..models.checkpoint import load_checkpoint, save_checkpoint, to_dict
 from .curriculum import EpisodeSource, FailurePool
 from .replay import EpisodeReplay
 from .sac import SAC, SACConfig

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..learning.checkpoint import check_compatible, load_checkpoint
+from .checkpoint import check_compatible, load_checkpoint
 from ..robots import make_robot
 from ..robots.base import Robot
 from .actor_critic import Actor, NetConfig
