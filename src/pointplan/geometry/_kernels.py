@@ -1,16 +1,13 @@
-"""Compiled (numba) kernels for the hottest collision test: oriented boxes against oriented
-boxes. Falls back to the numpy version in ``collision.py`` when numba is missing."""
+"""Compiled (numba) kernels for the hottest collision test (oriented boxes against oriented
+boxes) and for rays against boxes. The numpy versions in ``collision.py`` (``obb_overlap``)
+and ``raycast.py`` (``box_slabs_reference``) compute the same and are what the tests compare
+them with."""
 
 from __future__ import annotations
 
 import numpy as np
 
-try:
-    import numba
-
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover - numba is a dependency, but keep working without it
-    HAVE_NUMBA = False
+import numba
 
 
 def _obb_overlap_flat(ca, ra, ha, cb, rb, hb, out):  # type: ignore[no-untyped-def]
@@ -68,8 +65,7 @@ def _obb_overlap_flat(ca, ra, ha, cb, rb, hb, out):  # type: ignore[no-untyped-d
                 out[b, i, j] = not sep
 
 
-if HAVE_NUMBA:
-    _obb_overlap_flat = numba.njit(cache=True, nogil=True)(_obb_overlap_flat)
+_obb_overlap_flat = numba.njit(cache=True, nogil=True)(_obb_overlap_flat)
 
 
 def obb_overlap_compiled(ca, ra, ha, cb, rb, hb):  # type: ignore[no-untyped-def]
@@ -133,8 +129,7 @@ def _ray_box_flat(o, d, c, rot, h, t0, t1, axis):  # type: ignore[no-untyped-def
                 axis[b, r, k] = ax
 
 
-if HAVE_NUMBA:
-    _ray_box_flat = numba.njit(cache=True, nogil=True, error_model="numpy")(_ray_box_flat)
+_ray_box_flat = numba.njit(cache=True, nogil=True, error_model="numpy")(_ray_box_flat)
 
 
 def ray_box_compiled(o, d, c, rot, h):  # type: ignore[no-untyped-def]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import csv
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -357,7 +357,3 @@ def _train(
     wall = elapsed_before + time.perf_counter() - t_start
     return TrainResult(run_dir=run_dir, best_success=best, steps=steps, wall_time_s=wall, history=history)
 
-
-def with_overrides(cfg: TrainConfig, **kw: Any) -> TrainConfig:
-    """A copy of ``cfg`` with some fields replaced."""
-    return replace(cfg, **kw)
