@@ -68,6 +68,10 @@ class Scenario3D(Scenario):
         self.config = config or BoxesConfig()
         self._cache: OrderedDict[tuple[str, int], Scene] = OrderedDict()
 
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return LOW.copy(), HIGH.copy()
+
     def scene(self, split: str, index: int) -> Scene:
         key = (split, int(index))
         s = self._cache.get(key)
