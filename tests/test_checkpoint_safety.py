@@ -18,12 +18,12 @@ import torch
 import pointplan
 from pointplan.cli import main
 from pointplan.envs.core import EnvConfig
-from pointplan.models.checkpoint import FORMAT, VERSION, CheckpointError, find_non_plain, load_checkpoint, save_checkpoint, to_dict
-from pointplan.models.convert import convert_checkpoint
 from pointplan.learning.replay import EpisodeReplay
 from pointplan.learning.sac import SAC, SACConfig
 from pointplan.learning.train import TrainConfig, train
 from pointplan.models.actor_critic import NetConfig
+from pointplan.models.checkpoint import FORMAT, VERSION, CheckpointError, find_non_plain, load_checkpoint, save_checkpoint, to_dict
+from pointplan.models.convert import convert_checkpoint
 from pointplan.models.encoders import EncoderConfig
 from pointplan.models.policy import Policy, shipped_checkpoint
 from pointplan.robots import Disc2D

@@ -64,3 +64,74 @@ def test_bad_inputs_give_clear_errors(tmp_path: Path, capsys: pytest.CaptureFixt
 def test_module_entry_point() -> None:
     res = subprocess.run([sys.executable, "-m", "pointplan", "--version"], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0 and "pointplan" in res.stdout
+
+
+# ---------------------------------------------------------------------------- train options and --resume
+@pytest.fixture
+def captured_train(monkeypatch: pytest.MonkeyPatch) -> dict[str, object]:
+    """Replace the training loop by a recorder of what the command asked for."""
+    import pointplan.learning.train as train_mod
+
+    seen: dict[str, object] = {}
+
+    def fake_train(cfg, run_dir, **kw):  # type: ignore[no-untyped-def]
+        seen.update(cfg=cfg, run_dir=Path(run_dir), **kw)
+        return train_mod.TrainResult(run_dir=Path(run_dir), best_success=0.5, steps=cfg.total_steps, wall_time_s=1.0, history=[])
+
+    monkeypatch.setattr(train_mod, "train", fake_train)
+    return seen
+
+
+def _saved_run(tmp_path: Path, steps: int = 1000, **cfg_over: object) -> Path:
+    from dataclasses import replace
+
+    from pointplan.learning.train import TrainConfig
+    from pointplan.models.checkpoint import save_checkpoint, to_dict
+
+    cfg = replace(TrainConfig(total_steps=2000), **cfg_over)
+    run = tmp_path / "run"
+    base = {"env": "narrow2d", "robot": "disc2d", "observation": "surface-normals", "n_points": 64, "obs_shape": [64, 4], "net": to_dict(cfg.net), "train_config": to_dict(cfg), "actor": {}}
+    save_checkpoint(run / "last.pt", {**base, "trainer": {"steps": steps}})
+    save_checkpoint(run / "best.pt", base)
+    save_checkpoint(run / "bc.pt", {**base, "bc_config": {}})
+    return run
+
+
+def test_train_options_and_defaults_come_from_the_config_dataclasses(captured_train: dict[str, object], capsys: pytest.CaptureFixture[str]) -> None:
+    from pointplan.learning.sac import SACConfig
+    from pointplan.learning.train import TrainConfig
+
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for flag, default in (("--steps", TrainConfig.total_steps), ("--lr", SACConfig.lr), ("--pool-size", TrainConfig.pool_size), ("--pool-retries", TrainConfig.pool_retries), ("--init-alpha", SACConfig.init_alpha)):
+        assert flag in text and f"(default: {default})" in text
+    assert main(["train", "--quiet", "--init-alpha", "0.5", "--pool-size", "7", "--steps", "300"]) == 0
+    cfg = captured_train["cfg"]
+    assert cfg.sac.init_alpha == 0.5 and cfg.pool_size == 7 and cfg.total_steps == 300  # type: ignore[attr-defined]
+    assert cfg.sac.lr == SACConfig.lr and cfg.eval_every == TrainConfig.eval_every  # type: ignore[attr-defined]
+
+
+def test_resume_takes_every_option_and_stays_in_its_folder(tmp_path: Path, captured_train: dict[str, object]) -> None:
+    run = _saved_run(tmp_path)
+    args = ["train", "--quiet", "--resume", str(run / "last.pt"), "--steps", "5000", "--init-alpha", "0.3", "--actor-delay", "9", "--pool-size", "11", "--pool-retries", "2"]
+    assert main(args) == 0
+    cfg = captured_train["cfg"]
+    assert (cfg.sac.init_alpha, cfg.sac.actor_delay, cfg.pool_size, cfg.pool_retries, cfg.total_steps) == (0.3, 9, 11, 2, 5000)  # type: ignore[attr-defined]
+    assert captured_train["run_dir"] == run  # not a second folder
+
+
+def test_resume_from_a_policy_checkpoint_says_what_to_do(tmp_path: Path, captured_train: dict[str, object], capsys: pytest.CaptureFixture[str]) -> None:
+    run = _saved_run(tmp_path)
+    assert main(["train", "--quiet", "--resume", str(run / "best.pt"), "--steps", "5000"]) == 2
+    err = capsys.readouterr().err
+    assert "best.pt" in err and "last.pt" in err and "KeyError" not in err
+    assert main(["train", "--quiet", "--resume", str(run / "bc.pt"), "--steps", "5000"]) == 2
+    assert "--init-actor" in capsys.readouterr().err
+    assert not captured_train
+
+
+def test_resume_with_steps_already_done_is_an_error(tmp_path: Path, captured_train: dict[str, object], capsys: pytest.CaptureFixture[str]) -> None:
+    run = _saved_run(tmp_path, steps=1000)
+    assert main(["train", "--quiet", "--resume", str(run / "last.pt"), "--steps", "800"]) == 2
+    assert "done 1000 steps" in capsys.readouterr().err and not captured_train

@@ -1,6 +1,6 @@
 """No module of ``src/pointplan`` imports from a layer above its own.
 
-Layers, bottom up: geometry, robots, scenes/models, observers, envs, planners,
+Layers, bottom up: config (dataclass helpers), geometry, robots, scenes/models, observers, envs, planners,
 learning/evaluation/distributed, viz, cli. Packages on one layer may import each other;
 imports inside functions count too.
 """
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pointplan
 
-LAYERS = [("geometry",), ("robots",), ("scenes", "models"), ("observers",), ("envs",), ("planners",), ("learning", "evaluation", "distributed"), ("viz",), ("cli", "__main__")]
+LAYERS = [("config",), ("geometry",), ("robots",), ("scenes", "models"), ("observers",), ("envs",), ("planners",), ("learning", "evaluation", "distributed"), ("viz",), ("cli", "__main__")]
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
 #: deliberate exceptions, each with its reason
 ALLOWED = {

@@ -11,11 +11,11 @@ import torch
 from pointplan.envs import PlanningEnv
 from pointplan.envs.core import EnvConfig
 from pointplan.learning.bc import BCConfig, generate_demos, resample_path, train_bc
-from pointplan.models.checkpoint import CheckpointError
 from pointplan.learning.replay import EpisodeReplay
 from pointplan.learning.sac import batch_rewards
 from pointplan.learning.train import TrainConfig, train
 from pointplan.models.actor_critic import NetConfig, build_networks
+from pointplan.models.checkpoint import CheckpointError
 from pointplan.models.encoders import EncoderConfig, PointNetEncoder
 from pointplan.models.policy import Policy
 from pointplan.planners.policy import PolicyPlanner
@@ -162,8 +162,8 @@ def test_actor_delay_keeps_the_actor_still() -> None:
 def test_policy_average_is_an_exponential_average_of_the_actor(tmp_path: Path) -> None:
     """With ``policy_avg`` the averaged actor moves by ``rate`` towards the actor after every
     update, is what the run saves as its policy, and survives a resume."""
-    from pointplan.models.checkpoint import load_checkpoint
     from pointplan.learning.sac import SAC, SACConfig
+    from pointplan.models.checkpoint import load_checkpoint
 
     rng = np.random.default_rng(0)
     env = PlanningEnv("narrow2d")
@@ -197,8 +197,8 @@ def test_policy_average_is_an_exponential_average_of_the_actor(tmp_path: Path) -
 def test_training_resumes_from_last_checkpoint(tmp_path: Path) -> None:
     from dataclasses import replace
 
-    from pointplan.models.checkpoint import load_checkpoint
     from pointplan.learning.sac import SACConfig
+    from pointplan.models.checkpoint import load_checkpoint
 
     cfg = TrainConfig(env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, updates_per_step=0.25, eval_every=200, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32))
     first = train(cfg, tmp_path / "a", progress=False)

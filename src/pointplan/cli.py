@@ -364,45 +364,65 @@ def _net_config(args: argparse.Namespace) -> Any:
     return NetConfig(EncoderConfig(args.encoder, args.width, args.layers), head_width=args.width, head_layers=args.layers, critic_action=action, shared_encoder=shared)
 
 
+#: train options derived from TrainConfig and SACConfig: flag -> field path
+TRAIN_OPTIONS = {
+    "steps": "total_steps",
+    "num-envs": "num_envs",
+    "warmup-steps": "warmup_steps",
+    "updates-per-step": "updates_per_step",
+    "eval-every": "eval_every",
+    "eval-episodes": "eval_episodes",
+    "target-success": "target_success",
+    "init-actor": "init_actor",
+    "retry-failures": "retry_failures",
+    "mine-episodes": "mine_episodes",
+    "pool-size": "pool_size",
+    "pool-retries": "pool_retries",
+    "lr": "sac.lr",
+    "batch-size": "sac.batch_size",
+    "gamma": "sac.gamma",
+    "tau": "sac.tau",
+    "init-alpha": "sac.init_alpha",
+    "target-entropy-scale": "sac.target_entropy_scale",
+    "her-ratio": "sac.her_ratio",
+    "buffer-size": "sac.buffer_size",
+    "actor-delay": "sac.actor_delay",
+    "policy-avg": "sac.policy_avg",
+}
+
+
+def _resume_config(args: argparse.Namespace) -> Any:
+    """The configuration of the run ``--resume`` continues, with the options given on the
+    command line replacing its own (the networks and the scenario cannot change)."""
+    from .config import from_dict, given_options, replace_paths
+    from .learning.train import TrainConfig
+    from .models.checkpoint import load_checkpoint
+
+    data = load_checkpoint(args.resume)
+    if "trainer" not in data:
+        kind = "a behavioural-cloning policy (give it to --init-actor)" if "bc_config" in data or "dagger_config" in data else "a policy without the trainer's state"
+        raise CLIError(f"--resume {args.resume}: this is {kind}; resume from the run's last.pt")
+    cfg = from_dict(TrainConfig, data["train_config"])
+    done = int(data["trainer"]["steps"])
+    cfg = replace_paths(cfg, {**given_options(args, TRAIN_OPTIONS), "device": args.device})
+    if cfg.total_steps <= done:
+        raise CLIError(f"--resume {args.resume}: the run has done {done} steps already; give --steps above {done} to continue it")
+    return cfg
+
+
 def cmd_train(args: argparse.Namespace) -> int:
-    from .learning.sac import SACConfig
-    from .learning.train import TrainConfig, config_from_dict, train
+    from .config import given_options, replace_paths
+    from .learning.train import TrainConfig, train
 
     if args.resume:
-        from .models.checkpoint import load_checkpoint
-
-        cfg = config_from_dict(load_checkpoint(args.resume)["train_config"])
-        # settings given on the command line override the run's own; the networks cannot change
-        over: dict[str, object] = {"total_steps": args.steps or cfg.total_steps}
-        for name in ("updates_per_step", "eval_every", "eval_episodes", "target_success", "device", "retry_failures", "mine_episodes"):
-            if getattr(args, name) is not None:
-                over[name] = getattr(args, name)
-        sac_over = {k: getattr(args, k) for k in ("lr", "batch_size", "policy_avg") if getattr(args, k) is not None}
-        if sac_over:
-            over["sac"] = SACConfig(**{**cfg.sac.__dict__, **sac_over})
-        cfg = TrainConfig(**{**cfg.__dict__, **over})
+        cfg = _resume_config(args)
+        run_dir = args.run_dir or str(Path(args.resume).parent)  # the run's own folder
     else:
-        cfg = TrainConfig(
-            env=args.env,
-            robot=args.robot,
-            observation=_default_observation(args),
-            n_points=_default_points(args),
-            num_envs=args.num_envs,
-            total_steps=args.steps or 200_000,
-            updates_per_step=0.25 if args.updates_per_step is None else args.updates_per_step,
-            eval_every=args.eval_every or 10_000,
-            eval_episodes=args.eval_episodes or 100,
-            target_success=1.01 if args.target_success is None else args.target_success,
-            seed=args.seed,
-            device=args.device or "cpu",
-            net=_net_config(args),
-            sac=SACConfig(batch_size=args.batch_size or 256, lr=args.lr or 3e-4, init_alpha=args.init_alpha, actor_delay=args.actor_delay, policy_avg=args.policy_avg or 0.0),
-            init_actor=args.init_actor,
-            retry_failures=args.retry_failures or 0.0,
-            mine_episodes=args.mine_episodes or 0,
-        )
+        base = TrainConfig(env=args.env, robot=args.robot, observation=_default_observation(args), n_points=_default_points(args), seed=args.seed, device=args.device, net=_net_config(args))
+        cfg = replace_paths(base, given_options(args, TRAIN_OPTIONS))
+        run_dir = args.run_dir or "runs/latest"
     scale = _scale(args)
-    res = train(cfg, args.run_dir, progress=not args.quiet, resume=args.resume, sync_every=args.sync_every, **scale)
+    res = train(cfg, run_dir, progress=not args.quiet, resume=args.resume, sync_every=args.sync_every, **scale)
     print(f"best validation success {res.best_success:.3f} after {res.steps} env steps, {res.wall_time_s:.0f} s; checkpoints in {res.run_dir}")
     return 130 if getattr(res, "interrupted", False) else 0
 
@@ -429,15 +449,21 @@ def cmd_bc(args: argparse.Namespace) -> int:
 
         dcfg = DaggerConfig(cfg, rounds=args.dagger_rounds, rollouts=args.rollouts, epochs_per_round=args.epochs_per_round, eval_episodes=args.eval_episodes)
         if args.resume:
+            from .config import from_dict
             from .models.checkpoint import load_checkpoint
-            from .learning.dagger import config_from_dict
 
-            dcfg = config_from_dict(load_checkpoint(args.resume)["dagger_config"], rounds=args.dagger_rounds or None)
+            data = load_checkpoint(args.resume)
+            if "dagger_config" not in data:
+                raise CLIError(f"--resume {args.resume}: not a DAgger checkpoint; resume from a DAgger run's last.pt")
+            dcfg = from_dict(DaggerConfig, data["dagger_config"])
+            if args.dagger_rounds:
+                dcfg = dataclasses.replace(dcfg, rounds=args.dagger_rounds)
             # the Ray cluster is this command's, not the one the run started on
             dcfg = dataclasses.replace(dcfg, bc=dataclasses.replace(dcfg.bc, address=args.address))
-        summary = train_dagger(dcfg, args.run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume)
+        run_dir = args.run_dir or (str(Path(args.resume).parent) if args.resume else "runs/latest")
+        summary = train_dagger(dcfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume)
     else:
-        summary = train_bc(cfg, args.run_dir, progress=not args.quiet)
+        summary = train_bc(cfg, args.run_dir or "runs/latest", progress=not args.quiet)
     print(json.dumps(summary, indent=2))
     return 0
 
@@ -481,7 +507,7 @@ def _add_net(p: argparse.ArgumentParser) -> None:
     p.add_argument("--paper", action="store_true", help="the paper's networks: 3 x 256, separate encoders, action on every point")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="cpu", help="cpu or cuda")
-    p.add_argument("--run-dir", default="runs/latest", help="where checkpoints and logs go (default: %(default)s)")
+    p.add_argument("--run-dir", help="where checkpoints and logs go (default: runs/latest; with --resume the checkpoint's folder)")
     p.add_argument("--quiet", action="store_true")
 
 
@@ -532,23 +558,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scale(p)
     p.set_defaults(func=cmd_plan)
 
+    from .config import add_config_options
+    from .learning.train import TrainConfig
+
     p = sub.add_parser("train", help="train a policy with SAC + HER")
     _add_net(p)
-    p.add_argument("--steps", type=int, help="environment steps to collect (default: 200000)")
-    p.add_argument("--num-envs", type=int, default=16, help="workspaces stepping together")
-    p.add_argument("--updates-per-step", type=float, help="gradient steps per env step (default: 0.25)")
-    p.add_argument("--batch-size", type=int, help="default: 256")
-    p.add_argument("--lr", type=float, help="Adam step size of actor, critics and temperature (default: 3e-4)")
-    p.add_argument("--eval-every", type=int, help="env steps between validation runs (default: 10000)")
-    p.add_argument("--eval-episodes", type=int, help="validation problems (default: 100)")
-    p.add_argument("--target-success", type=float, help="stop once validation success reaches this")
-    p.add_argument("--init-actor", help="start the actor from this checkpoint (e.g. a BC one)")
-    p.add_argument("--init-alpha", type=float, default=1.0, help="initial entropy temperature (default: %(default)s)")
-    p.add_argument("--actor-delay", type=int, default=0, help="critic-only updates before the actor moves (default: %(default)s)")
-    p.add_argument("--policy-avg", type=float, help="rate of a running average of the actor's weights, evaluated and saved as the policy (default: 0, off; e.g. 3e-5)")
-    p.add_argument("--retry-failures", type=float, help="share of new episodes that retry a problem the policy failed (default: 0, off; e.g. 0.25)")
-    p.add_argument("--mine-episodes", type=int, help="fresh training problems the deterministic policy attempts at each validation; its failures are retried (default: 0)")
-    p.add_argument("--resume", help="continue a run from its last.pt")
+    add_config_options(p, TrainConfig(), TRAIN_OPTIONS)
+    p.add_argument("--resume", help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own")
     p.add_argument("--workers", type=int, default=None, help="Ray rollout workers stepping the --num-envs environments (shared out among them) while this process learns (pip install 'pointplan[ray]'; default: one process)")
     p.add_argument("--address", help="an existing Ray cluster to run the rollout workers on (see docs/scaling.md)")
     p.add_argument("--sync-every", type=int, help="with --workers: learner updates between two broadcasts of the actor's weights (default: 16)")

@@ -40,14 +40,15 @@ class RolloutWorker:
     def __init__(self, cfg: dict[str, Any], index: int, num_envs: int) -> None:
         import torch
 
+        from ..config import from_dict
         from ..envs.core import BatchedCore, EnvConfig
         from ..learning.curriculum import EpisodeSource
-        from ..learning.train import config_from_dict
+        from ..learning.train import TrainConfig
         from ..models.actor_critic import Actor
         from ..scenes.scenarios import make_scenario
 
         torch.set_num_threads(1)
-        self.cfg = c = config_from_dict(cfg)
+        self.cfg = c = from_dict(TrainConfig, cfg)
         scenario = make_scenario(c.env, robot=c.robot)
         self.robot = scenario.robot
         self.core = BatchedCore(scenario, num_envs, EnvConfig(observation=c.observation, n_points=c.n_points, split="train"))

@@ -5,9 +5,8 @@ them with."""
 
 from __future__ import annotations
 
-import numpy as np
-
 import numba
+import numpy as np
 
 
 def _obb_overlap_flat(ca, ra, ha, cb, rb, hb, out):  # type: ignore[no-untyped-def]

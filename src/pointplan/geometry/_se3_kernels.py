@@ -19,9 +19,8 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 import numba
+import numpy as np
 
 #: below this angle the coefficients that divide by powers of it use Taylor series
 _SMALL = 1e-4

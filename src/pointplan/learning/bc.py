@@ -19,13 +19,13 @@ import torch
 
 from ..envs.core import EnvConfig
 from ..models.actor_critic import Actor, NetConfig
+from ..models.checkpoint import save_checkpoint, to_dict
 from ..models.encoders import EncoderConfig
 from ..models.inputs import goal_input, obs_input
 from ..observers import make_observer
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Problem
-from ..models.checkpoint import save_checkpoint, to_dict
 
 
 @dataclass

@@ -24,6 +24,7 @@ import torch
 
 from ..envs.core import EnvConfig
 from ..models.actor_critic import Actor
+from ..models.checkpoint import load_checkpoint, save_checkpoint, to_dict
 from ..models.policy import Policy
 from ..scenes.scenarios import Scenario, make_scenario
 from .bc import (
@@ -39,7 +40,6 @@ from .bc import (
     policy_payload,
     save_demos,
 )
-from ..models.checkpoint import load_checkpoint, save_checkpoint, to_dict
 
 
 @dataclass(frozen=True)
@@ -175,17 +175,3 @@ def train_dagger(cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, 
     return {"run_dir": str(run_dir), "best_success": best, "demo_steps": len(demos), "wall_time_s": wall_before + time.perf_counter() - t0}
 
 
-def config_from_dict(d: dict[str, Any], rounds: int | None = None) -> DaggerConfig:
-    """The configuration saved in a DAgger checkpoint (``rounds`` replaced if given)."""
-    from ..models.actor_critic import NetConfig
-    from ..models.encoders import EncoderConfig
-
-    d = dict(d)
-    bc = dict(d["bc"])
-    net = dict(bc["net"])
-    net["encoder"] = EncoderConfig(**net["encoder"])
-    bc["net"] = NetConfig(**net)
-    d["bc"] = BCConfig(**bc)
-    if rounds:
-        d["rounds"] = rounds
-    return DaggerConfig(**d)

@@ -26,14 +26,21 @@ from .replay import Batch
 class SACConfig:
     """SAC hyperparameters; defaults are the paper's."""
 
+    #: Adam step size of actor, critics and temperature
     lr: float = 3e-4
+    #: transitions per gradient step
     batch_size: int = 256
+    #: discount factor
     gamma: float = 0.99
+    #: rate of the target critics' running average
     tau: float = 5e-3
     #: target entropy per action dimension (the target is this times dim(A))
     target_entropy_scale: float = -1.0
+    #: initial entropy temperature
     init_alpha: float = 1.0
+    #: share of sampled transitions whose goal is relabelled (hindsight)
     her_ratio: float = 0.8
+    #: replay buffer capacity in transitions
     buffer_size: int = 1_000_000
     #: critic-only updates before the actor and temperature start to move (useful when the
     #: actor starts from behavioural cloning and the critic from scratch)

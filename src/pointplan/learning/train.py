@@ -19,12 +19,13 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..config import from_dict
 from ..envs.core import BatchedCore, EnvConfig
 from ..models.actor_critic import NetConfig
+from ..models.checkpoint import load_checkpoint, save_checkpoint, to_dict
 from ..models.encoders import EncoderConfig
 from ..scenes.scenarios import make_scenario
 from ..scenes.scene import Problem
-from ..models.checkpoint import load_checkpoint, save_checkpoint, to_dict
 from .curriculum import EpisodeSource, FailurePool
 from .replay import EpisodeReplay
 from .sac import SAC, SACConfig
@@ -47,11 +48,15 @@ class TrainConfig:
     warmup_steps: int = 1_000
     #: gradient steps per collected transition (the paper: 1)
     updates_per_step: float = 0.25
+    #: environment transitions between two validations (and checkpoints)
     eval_every: int = 10_000
+    #: validation problems (the ``val`` split)
     eval_episodes: int = 100
     #: stop early once the validation success reaches this
     target_success: float = 1.01
+    #: seeds the problems, the networks and the validation set
     seed: int = 0
+    #: ``cpu`` or ``cuda``
     device: str = "cpu"
     net: NetConfig = field(default_factory=lambda: NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True))
     sac: SACConfig = field(default_factory=SACConfig)
@@ -63,18 +68,10 @@ class TrainConfig:
     #: at every validation, the deterministic policy also attempts this many fresh training
     #: problems; the ones it fails enter the retry pool
     mine_episodes: int = 0
-    #: problems kept for retrying, and retries per problem after its last failure
+    #: problems kept for retrying
     pool_size: int = 2000
+    #: retries of a problem after its last failure
     pool_retries: int = 4
-
-
-def config_from_dict(d: dict[str, Any]) -> TrainConfig:
-    d = dict(d)
-    net = dict(d["net"])
-    net["encoder"] = EncoderConfig(**net["encoder"])
-    d["net"] = NetConfig(**net)
-    d["sac"] = SACConfig(**d["sac"])
-    return TrainConfig(**d)
 
 
 @dataclass
@@ -208,7 +205,7 @@ def _train(
         elapsed_before = float(state["trainer"]["wall_time_s"])
         rng.bit_generator.state = state["trainer"]["rng"]
         torch.set_rng_state(state["trainer"]["torch_rng"])
-        before = config_from_dict(state["train_config"])
+        before = from_dict(TrainConfig, state["train_config"])
         if before.sac.lr != cfg.sac.lr:
             agent.set_lr(cfg.sac.lr)
         if (before.eval_episodes, before.seed) != (cfg.eval_episodes, cfg.seed):

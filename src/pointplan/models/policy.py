@@ -11,18 +11,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from .checkpoint import check_compatible, load_checkpoint
+from ..config import from_dict
 from ..robots import make_robot
 from ..robots.base import Robot
 from .actor_critic import Actor, NetConfig
-from .encoders import EncoderConfig
+from .checkpoint import check_compatible, load_checkpoint
 from .inputs import goal_input, obs_input
-
-
-def net_config_from_dict(d: dict[str, Any]) -> NetConfig:
-    d = dict(d)
-    d["encoder"] = EncoderConfig(**d["encoder"])
-    return NetConfig(**d)
 
 
 class Policy:
@@ -50,7 +44,7 @@ class Policy:
     def from_checkpoint(cls, path: str | Path, device: str = "cpu") -> Policy:
         data = load_checkpoint(path, device)
         robot = make_robot(data["robot"])
-        net = net_config_from_dict(data["net"])
+        net = from_dict(NetConfig, data["net"])
         actor = Actor(tuple(data["obs_shape"]), robot.twist_dim, robot.twist_dim, net)
         actor.load_state_dict(data["actor"])  # a shared encoder's weights come with the actor
         actor.detach_encoder = False

@@ -30,12 +30,12 @@ from typing import Any
 import numpy as np
 
 from ..envs.core import BatchedCore, EnvConfig, q_free
+from ..observers.base import PointSetObserver
 from ..robots.base import Robot
 from ..robots.point import Disc2D, Sphere3D
 from ..scenes.scenarios import Scenario
 from ..scenes.scene import Problem, Scene
 from .base import PlanResult
-from ..observers.base import PointSetObserver
 from .edges import edge_free
 
 ActFn = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
