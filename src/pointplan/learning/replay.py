@@ -1,7 +1,9 @@
 """Episode-aware replay buffer with hindsight goal relabelling ("future" strategy).
 
 Transitions are stored whole episodes at a time (an episode enters the buffer when it
-ends), so every transition knows where its episode ends. A relabelled sample replaces the
+ends), so every transition knows where its episode ends. With :meth:`EpisodeReplay.track`
+the buffer also stages the episodes ``E`` environments are in: :meth:`add_steps` takes one
+transition per environment and adds each episode as it ends. A relabelled sample replaces the
 goal with the configuration reached at a later step of the same episode; its reward is
 recomputed from the stored action norm and collision flag, exactly as the environment
 would have computed it (see ``BatchedCore.reward``).
@@ -30,6 +32,10 @@ class Batch:
     relabelled: NDArray[np.bool_]
 
 
+#: the stored fields of a transition, in :meth:`EpisodeReplay.add_episode`'s order
+_FIELDS = ("obs", "next_obs", "q", "q_next", "goal", "action", "action_norm", "collided")
+
+
 class EpisodeReplay:
     """A ring buffer of ``capacity`` transitions.
 
@@ -54,6 +60,25 @@ class EpisodeReplay:
         self.pos = 0
         self.size = 0
         self.n_episodes = 0
+        self._staged: dict[str, np.ndarray] = {}
+
+    def track(self, num_envs: int, horizon: int) -> None:
+        """Stage the running episodes of ``num_envs`` environments of at most ``horizon`` steps."""
+        e, h = int(num_envs), int(horizon)
+        self._staged = {k: np.zeros((e, h) + getattr(self, k).shape[1:], getattr(self, k).dtype) for k in _FIELDS}
+
+    def add_steps(self, t: np.ndarray, done: np.ndarray, **transition: np.ndarray) -> None:
+        """One transition per tracked environment, at step ``t[i]`` of its episode (the
+        fields of :meth:`add_episode` as keywords); the episodes that are ``done`` enter
+        the buffer, in environment order."""
+        if not self._staged:
+            raise RuntimeError("call track(num_envs, horizon) first")
+        rows = np.arange(len(t))
+        for k in _FIELDS:
+            self._staged[k][rows, t] = transition[k]
+        for i in np.flatnonzero(done):
+            n = int(t[i]) + 1
+            self.add_episode(*(self._staged[k][i, :n] for k in _FIELDS))
 
     def __len__(self) -> int:
         return self.size

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from ..envs.core import EnvConfig
+from ..envs.core import EnvConfig, goal_reached, step_reward
 from ..models.actor_critic import NetConfig, build_networks
 from ..models.inputs import goal_input, obs_input
 from ..robots.base import Robot
@@ -53,9 +53,8 @@ class SACConfig:
 
 def batch_rewards(robot: Robot, env: EnvConfig, b: Batch) -> tuple[np.ndarray, np.ndarray]:
     """Rewards and success flags of (possibly relabelled) transitions, as the env gives them."""
-    success = (robot.distance(b.q_next, b.goal) < env.goal_tolerance) & ~b.collided
-    reward = -b.action_norm + np.where(b.collided, env.reward_collision, env.reward_free) + env.reward_success * success
-    return reward, success
+    success = goal_reached(robot, env, b.q_next, b.goal, b.collided)
+    return step_reward(env, b.action_norm, b.collided, success), success
 
 
 class SAC:
