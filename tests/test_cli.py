@@ -135,3 +135,56 @@ def test_resume_with_steps_already_done_is_an_error(tmp_path: Path, captured_tra
     run = _saved_run(tmp_path, steps=1000)
     assert main(["train", "--quiet", "--resume", str(run / "last.pt"), "--steps", "800"]) == 2
     assert "done 1000 steps" in capsys.readouterr().err and not captured_train
+
+
+# ---------------------------------------------------------------------------- Ctrl-C and the progress bar
+TINY_TRAIN = ["--num-envs", "4", "--eval-episodes", "2", "--warmup-steps", "100", "--batch-size", "16", "--buffer-size", "2000"]
+
+
+def test_ctrl_c_in_train_saves_the_trainer_state_and_exits_130(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    import signal
+
+    import pointplan.learning.train as train_mod
+    from pointplan.models.checkpoint import load_checkpoint
+
+    learn = train_mod._learn
+
+    def learn_then_ctrl_c(run, collected):  # type: ignore[no-untyped-def]
+        learn(run, collected)
+        if run.steps == 200:
+            signal.raise_signal(signal.SIGINT)
+
+    monkeypatch.setattr(train_mod, "_learn", learn_then_ctrl_c)
+    run = tmp_path / "run"
+    assert main(["train", "--quiet", "--steps", "2000", "--eval-every", "1000", *TINY_TRAIN, "--run-dir", str(run)]) == 130
+    err = capsys.readouterr().err
+    assert f"interrupted at step 200: trainer state saved to {run / 'last.pt'}" in err and "Traceback" not in err
+    assert load_checkpoint(run / "last.pt")["trainer"]["steps"] == 200
+
+
+def test_ctrl_c_in_eval_keeps_the_finished_problems(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    import pointplan.evaluation  # noqa: F401
+
+    ev = sys.modules["pointplan.evaluation.evaluate"]  # (the package's `evaluate` is the function)
+    real, calls = ev.plan_and_check, []
+
+    def plan_then_ctrl_c(*a, **k):  # type: ignore[no-untyped-def]
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(ev, "plan_and_check", plan_then_ctrl_c)
+    out = tmp_path / "partial.json"
+    assert main(["eval", "--planner", "straight", "--episodes", "10", "--json", str(out), "--quiet"]) == 130
+    captured = capsys.readouterr()
+    assert "kept the 2 of 10 problems" in captured.err and "Traceback" not in captured.err
+    assert f"wrote {out}" in captured.out
+    data = json.loads(out.read_text())
+    assert data["interrupted"] == {"finished": 2, "problems": 10} and data["episodes"] == 2
+
+
+def test_training_progress_bar_stops_at_its_total(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["train", "--steps", "302", "--eval-every", "302", *TINY_TRAIN, "--run-dir", str(tmp_path)]) == 0
+    err = capsys.readouterr().err
+    assert "302/302" in err and "304/302" not in err

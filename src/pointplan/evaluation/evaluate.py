@@ -8,6 +8,7 @@ the planner says; the two are both recorded and disagreements counted.
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -172,6 +173,8 @@ class EvalReport:
 
     planner: str
     records: list[EpisodeRecord] = field(default_factory=list)
+    #: stopped by Ctrl-C: ``(finished, total)`` problems (the records are the finished ones)
+    interrupted: tuple[int, int] | None = None
 
     def metrics(self) -> dict[str, Any]:
         """Success rate; nodes, collision checks and time over *all* problems (and nodes over
@@ -226,29 +229,38 @@ def evaluate(
 
         it = tqdm(problems, desc=report.planner, unit="problem")
     n_ok = 0
-    for problem in it:
-        t0 = time.perf_counter()
-        result = planner.plan(problem)
-        elapsed = time.perf_counter() - t0
-        path = np.asarray(result.path, np.float64)
-        ok = len(path) > 0 and bool(check_path(robot, problem, path, resolution, tolerance))
-        n_ok += ok
-        report.records.append(
-            EpisodeRecord(
-                tag=problem.tag,
-                success=bool(ok),
-                claimed_success=bool(result.success),
-                nodes=int(result.nodes),
-                collision_checks=int(result.collision_checks),
-                # counted to the goal: a path that stops within the tolerance is charged the rest
-                path_length=path_length(robot, path) + float(robot.distance(path[-1], problem.goal)) if ok else math.nan,
-                time_s=elapsed,
-                path=path,
-            )
-        )
+    try:
+        for problem in it:
+            report.records.append(plan_and_check(planner, problem, robot, resolution, tolerance))
+            n_ok += report.records[-1].success
+            if progress:
+                it.set_postfix(success=f"{n_ok / len(report.records):.1%}")
+    except KeyboardInterrupt:  # keep what finished, as the Ray path does
         if progress:
-            it.set_postfix(success=f"{n_ok / len(report.records):.1%}")
+            it.close()
+        report.interrupted = (len(report.records), len(problems))
+        print(f"\ninterrupted: kept the {len(report.records)} of {len(problems)} problems that finished", file=sys.stderr)
     return report
+
+
+def plan_and_check(planner: Any, problem: Problem, robot: Robot, resolution: float = 0.01, tolerance: float = 0.07) -> EpisodeRecord:
+    """One problem planned and its path re-checked."""
+    t0 = time.perf_counter()
+    result = planner.plan(problem)
+    elapsed = time.perf_counter() - t0
+    path = np.asarray(result.path, np.float64)
+    ok = len(path) > 0 and bool(check_path(robot, problem, path, resolution, tolerance))
+    return EpisodeRecord(
+        tag=problem.tag,
+        success=bool(ok),
+        claimed_success=bool(result.success),
+        nodes=int(result.nodes),
+        collision_checks=int(result.collision_checks),
+        # counted to the goal: a path that stops within the tolerance is charged the rest
+        path_length=path_length(robot, path) + float(robot.distance(path[-1], problem.goal)) if ok else math.nan,
+        time_s=elapsed,
+        path=path,
+    )
 
 
 _ROWS = [

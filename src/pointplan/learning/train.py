@@ -10,6 +10,9 @@ are kept in the run directory with ``metrics.csv`` and TensorBoard logs.
 from __future__ import annotations
 
 import csv
+import signal
+import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -81,7 +84,8 @@ class TrainResult:
     steps: int
     wall_time_s: float
     history: list[dict[str, float]]
-    #: stopped by Ctrl-C (training on Ray workers), after a last validation and checkpoint
+    #: stopped by Ctrl-C: in one process after saving the trainer state at the current step
+    #: to ``last.pt``; with Ray workers after a last validation and checkpoint
     interrupted: bool = False
 
 
@@ -165,7 +169,7 @@ def train(
         remote = RayRollouts(cfg, workers, address, sync_every or SYNC_EVERY)
     try:
         res = _train(cfg, run_dir, progress, resume, on_eval, remote)
-        res.interrupted = bool(remote is not None and remote.interrupted)
+        res.interrupted = res.interrupted or bool(remote is not None and remote.interrupted)
         return res
     finally:
         if remote is not None:
@@ -408,9 +412,42 @@ def _evaluate(run: _Run, on_eval: Callable[[dict[str, float]], None] | None, bar
 
 def _progress(run: _Run, bar: Any, collected: int) -> None:
     if bar is not None:
-        bar.update(collected)
+        bar.update(max(0, min(collected, bar.total - bar.n)))  # the last step may overshoot the total
         if run.recent:
             bar.set_postfix(train_success=f"{np.mean(run.recent):.2f}", best_val=f"{max(run.best, 0):.3f}", updates=run.agent.updates)
+
+
+class _StopOnCtrlC:
+    """Ctrl-C (SIGINT) asks the loop to stop after the current step; a second one stops at once."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled and threading.current_thread() is threading.main_thread()
+        self.requested = False
+        self._old: Any = None
+
+    def __enter__(self) -> _StopOnCtrlC:
+        if self.enabled:
+            self._old = signal.signal(signal.SIGINT, self._on_sigint)
+        return self
+
+    def _on_sigint(self, signum: int, frame: Any) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __exit__(self, *exc: object) -> None:
+        if self.enabled:
+            signal.signal(signal.SIGINT, self._old)
+
+
+def _save_interrupted(run: _Run) -> None:
+    """``last.pt`` with the trainer state at the current step (no validation)."""
+    wall = run.wall
+    val = run.history[-1]["val_success"] if run.history else float("nan")
+    extra = {"env_steps": run.steps, "val_success": val, "wall_time_s": wall, "horizon": run.core.horizon}
+    payload = _checkpoint_payload(run.cfg, run.agent, run.obs_shape, run.scenario.robot.name, extra)
+    save_checkpoint(run.run_dir / "last.pt", {**payload, "trainer": _trainer_state(run, wall, run.best, run.best_nodes)})
+    print(f"\ninterrupted at step {run.steps}: trainer state saved to {run.run_dir / 'last.pt'} (continue with --resume)", file=sys.stderr)
 
 
 def _train(
@@ -427,16 +464,20 @@ def _train(
         from tqdm import tqdm
 
         bar = tqdm(total=cfg.total_steps, initial=run.steps, unit="step", dynamic_ncols=True)
-    while run.steps < cfg.total_steps:
-        stop_now = remote is not None and remote.interrupted
-        collected = _collect(run) if remote is None else _collect_remote(run, remote)
-        _learn(run, collected)
-        _progress(run, bar, collected)
-        if run.steps >= run.next_eval or run.steps >= cfg.total_steps or stop_now:
-            run.next_eval += cfg.eval_every
-            val = _evaluate(run, on_eval, bar)
-            if val >= cfg.target_success or stop_now:
+    with _StopOnCtrlC(enabled=remote is None) as ctrl_c:  # (Ray rollouts handle Ctrl-C themselves)
+        while run.steps < cfg.total_steps and not ctrl_c.requested:
+            stop_now = remote is not None and remote.interrupted
+            collected = _collect(run) if remote is None else _collect_remote(run, remote)
+            _learn(run, collected)
+            finished = False
+            if run.steps >= run.next_eval or run.steps >= cfg.total_steps or stop_now:
+                run.next_eval += cfg.eval_every
+                finished = _evaluate(run, on_eval, bar) >= cfg.target_success or stop_now
+            _progress(run, bar, collected)
+            if finished:
                 break
     if bar is not None:
         bar.close()
-    return TrainResult(run_dir=run.run_dir, best_success=run.best, steps=run.steps, wall_time_s=run.wall, history=run.history)
+    if ctrl_c.requested:
+        _save_interrupted(run)
+    return TrainResult(run_dir=run.run_dir, best_success=run.best, steps=run.steps, wall_time_s=run.wall, history=run.history, interrupted=ctrl_c.requested)
