@@ -78,7 +78,9 @@ def birrt_speed() -> None:
             res = BiRRT(robot, max_nodes=3000, seed=1).plan(problem)
             runs[compiled] = (time.perf_counter() - t, res)
         (t_np, a), (t_c, b) = runs[False], runs[True]
-        same = (a.success, a.nodes, a.collision_checks, len(a.path)) == (b.success, b.nodes, b.collision_checks, len(b.path)) and np.allclose(a.path, b.path, atol=1e-9)
+        same = (a.success, a.nodes, a.collision_checks, len(a.path)) == (b.success, b.nodes, b.collision_checks, len(b.path)) and np.allclose(
+            a.path, b.path, atol=1e-9
+        )
         print(f"{i:<18}{t_np:>9.2f}{t_c:>12.2f}{t_np / t_c:>7.2f}x{b.nodes:>7}  {same}")
 
 

@@ -90,7 +90,16 @@ def _saved_run(tmp_path: Path, steps: int = 1000, **cfg_over: object) -> Path:
 
     cfg = replace(TrainConfig(total_steps=2000), **cfg_over)
     run = tmp_path / "run"
-    base = {"env": "narrow2d", "robot": "disc2d", "observation": "surface-normals", "n_points": 64, "obs_shape": [64, 4], "net": to_dict(cfg.net), "train_config": to_dict(cfg), "actor": {}}
+    base = {
+        "env": "narrow2d",
+        "robot": "disc2d",
+        "observation": "surface-normals",
+        "n_points": 64,
+        "obs_shape": [64, 4],
+        "net": to_dict(cfg.net),
+        "train_config": to_dict(cfg),
+        "actor": {},
+    }
     save_checkpoint(run / "last.pt", {**base, "trainer": {"steps": steps}})
     save_checkpoint(run / "best.pt", base)
     save_checkpoint(run / "bc.pt", {**base, "bc_config": {}})
@@ -104,7 +113,13 @@ def test_train_options_and_defaults_come_from_the_config_dataclasses(captured_tr
     with pytest.raises(SystemExit):
         main(["train", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    for flag, default in (("--steps", TrainConfig.total_steps), ("--lr", SACConfig.lr), ("--pool-size", TrainConfig.pool_size), ("--pool-retries", TrainConfig.pool_retries), ("--init-alpha", SACConfig.init_alpha)):
+    for flag, default in (
+        ("--steps", TrainConfig.total_steps),
+        ("--lr", SACConfig.lr),
+        ("--pool-size", TrainConfig.pool_size),
+        ("--pool-retries", TrainConfig.pool_retries),
+        ("--init-alpha", SACConfig.init_alpha),
+    ):
         assert flag in text and f"(default: {default})" in text
     assert main(["train", "--quiet", "--init-alpha", "0.5", "--pool-size", "7", "--steps", "300"]) == 0
     cfg = captured_train["cfg"]
@@ -114,7 +129,22 @@ def test_train_options_and_defaults_come_from_the_config_dataclasses(captured_tr
 
 def test_resume_takes_every_option_and_stays_in_its_folder(tmp_path: Path, captured_train: dict[str, object]) -> None:
     run = _saved_run(tmp_path)
-    args = ["train", "--quiet", "--resume", str(run / "last.pt"), "--steps", "5000", "--init-alpha", "0.3", "--actor-delay", "9", "--pool-size", "11", "--pool-retries", "2"]
+    args = [
+        "train",
+        "--quiet",
+        "--resume",
+        str(run / "last.pt"),
+        "--steps",
+        "5000",
+        "--init-alpha",
+        "0.3",
+        "--actor-delay",
+        "9",
+        "--pool-size",
+        "11",
+        "--pool-retries",
+        "2",
+    ]
     assert main(args) == 0
     cfg = captured_train["cfg"]
     assert (cfg.sac.init_alpha, cfg.sac.actor_delay, cfg.pool_size, cfg.pool_retries, cfg.total_steps) == (0.3, 9, 11, 2, 5000)  # type: ignore[attr-defined]

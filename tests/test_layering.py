@@ -12,7 +12,18 @@ from pathlib import Path
 
 import pointplan
 
-LAYERS = [("config",), ("geometry",), ("robots",), ("scenes", "models"), ("observers",), ("envs",), ("planners",), ("learning", "evaluation", "distributed"), ("viz",), ("cli", "__main__")]
+LAYERS = [
+    ("config",),
+    ("geometry",),
+    ("robots",),
+    ("scenes", "models"),
+    ("observers",),
+    ("envs",),
+    ("planners",),
+    ("learning", "evaluation", "distributed"),
+    ("viz",),
+    ("cli", "__main__"),
+]
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
 #: deliberate exceptions, each with its reason
 ALLOWED = {

@@ -130,6 +130,7 @@ def test_qureshi_sizes_are_permuted_at_fixed_centres() -> None:
     assert sorted(map(tuple, (o.size for o in a))) == sorted(map(tuple, (o.size for o in b)))
     assert any(not np.array_equal(x.size, y.size) for x, y in zip(a, b))
     assert all(np.array_equal(o.rotation, np.eye(3)) for o in a)
+
     # only 10! layouts exist: the splits own disjoint sets of them
     def layout(scene):
         return tuple(tuple(o.size) for o in scene.obstacles)

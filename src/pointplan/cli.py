@@ -118,9 +118,16 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument("--env", default="narrow2d", help="scenario: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d (default: narrow2d)")
     p.add_argument("--scene", help="plan on a scene file (JSON, see docs/scenes.md) instead of --env")
     p.add_argument("--robot", help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot), or the robot of a scene file that names none")
-    p.add_argument("--planner", default=planner_default, help="birrt, straight, policy, hybrid (the policy, then Bi-RRT where it fails) or ompl:NAME for an OMPL planner such as ompl:RRTConnect (pip install 'pointplan[ompl]') (default: %(default)s)")
+    p.add_argument(
+        "--planner",
+        default=planner_default,
+        help="birrt, straight, policy, hybrid (the policy, then Bi-RRT where it fails) or ompl:NAME for an OMPL planner such as ompl:RRTConnect (pip install 'pointplan[ompl]') (default: %(default)s)",
+    )
     p.add_argument("--checkpoint", help="trained policy for --planner policy (default: the policy that ships for the robot and --observation)")
-    p.add_argument("--observation", help="what the robot observes (the policy's input; drawn by render and view): 2D surface, surface-normals, interior or image; 3D global or local (policy default: the one that ships for the robot)")
+    p.add_argument(
+        "--observation",
+        help="what the robot observes (the policy's input; drawn by render and view): 2D surface, surface-normals, interior or image; 3D global or local (policy default: the one that ships for the robot)",
+    )
     p.add_argument("--max-nodes", type=int, default=20000, help="Bi-RRT node budget (default: %(default)s)")
     p.add_argument("--time-limit", type=float, help="seconds per problem for ompl:NAME planners (default: 1)")
     p.add_argument("--range", type=float, help="longest edge of ompl:NAME planners that have one (default: 0.07, Bi-RRT's step)")
@@ -189,7 +196,9 @@ def cmd_render(args: argparse.Namespace) -> int:
 
         if args.gif:
             raise CLIError("--gif animates 3D scenes; for 2D use the PNG")
-        render_problem(problem, args.output, robot, observer_name=args.observation or "surface-normals", n_points=args.n_points or 64, result=result, seed=args.seed)
+        render_problem(
+            problem, args.output, robot, observer_name=args.observation or "surface-normals", n_points=args.n_points or 64, result=result, seed=args.seed
+        )
         print(f"wrote {args.output}")
         return 0
     from .evaluation.evaluate import timed_path
@@ -361,7 +370,9 @@ def _net_config(args: argparse.Namespace) -> Any:
         return NetConfig(EncoderConfig(args.encoder, 256, 3), head_width=256, head_layers=3, critic_action="points", shared_encoder=False)
     shared = args.encoder_sharing == "shared"
     action = args.critic_action or ("pooled" if shared else "points")
-    return NetConfig(EncoderConfig(args.encoder, args.width, args.layers), head_width=args.width, head_layers=args.layers, critic_action=action, shared_encoder=shared)
+    return NetConfig(
+        EncoderConfig(args.encoder, args.width, args.layers), head_width=args.width, head_layers=args.layers, critic_action=action, shared_encoder=shared
+    )
 
 
 #: train options derived from TrainConfig and SACConfig: flag -> field path
@@ -400,7 +411,11 @@ def _resume_config(args: argparse.Namespace) -> Any:
 
     data = load_checkpoint(args.resume)
     if "trainer" not in data:
-        kind = "a behavioural-cloning policy (give it to --init-actor)" if "bc_config" in data or "dagger_config" in data else "a policy without the trainer's state"
+        kind = (
+            "a behavioural-cloning policy (give it to --init-actor)"
+            if "bc_config" in data or "dagger_config" in data
+            else "a policy without the trainer's state"
+        )
         raise CLIError(f"--resume {args.resume}: this is {kind}; resume from the run's last.pt")
     cfg = from_dict(TrainConfig, data["train_config"])
     done = int(data["trainer"]["steps"])
@@ -418,7 +433,15 @@ def cmd_train(args: argparse.Namespace) -> int:
         cfg = _resume_config(args)
         run_dir = args.run_dir or str(Path(args.resume).parent)  # the run's own folder
     else:
-        base = TrainConfig(env=args.env, robot=args.robot, observation=_default_observation(args), n_points=_default_points(args), seed=args.seed, device=args.device, net=_net_config(args))
+        base = TrainConfig(
+            env=args.env,
+            robot=args.robot,
+            observation=_default_observation(args),
+            n_points=_default_points(args),
+            seed=args.seed,
+            device=args.device,
+            net=_net_config(args),
+        )
         cfg = replace_paths(base, given_options(args, TRAIN_OPTIONS))
         run_dir = args.run_dir or "runs/latest"
     scale = _scale(args)
@@ -483,8 +506,7 @@ def cmd_convert_checkpoint(args: argparse.Namespace) -> int:
     from .models.convert import convert_checkpoint
 
     print(
-        f"pointplan: warning: convert-checkpoint fully unpickles {args.old}, which runs any code stored in it; "
-        "convert only files from a source you trust",
+        f"pointplan: warning: convert-checkpoint fully unpickles {args.old}, which runs any code stored in it; convert only files from a source you trust",
         file=sys.stderr,
     )
     notes = convert_checkpoint(args.old, args.new, trust_source=True)
@@ -512,7 +534,12 @@ def _add_net(p: argparse.ArgumentParser) -> None:
 
 
 def _add_scale(p: argparse.ArgumentParser, what: str = "problems are planned by") -> None:
-    p.add_argument("--workers", type=int, default=None, help=f"{what} this many Ray workers on this machine (pip install 'pointplan[ray]'; default: one process); results equal a serial run's")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help=f"{what} this many Ray workers on this machine (pip install 'pointplan[ray]'; default: one process); results equal a serial run's",
+    )
     p.add_argument("--address", help="an existing Ray cluster to run the workers on (e.g. auto, or ray://head:10001; see docs/scaling.md)")
 
 
@@ -547,8 +574,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("plan", help="plan the problems of a scene file, of a point cloud file (or of --env)")
     _add_common(p)
-    p.add_argument("--points", help="plan among the points of a cloud file (.ply, .pcd, .npy, .xyz, .txt, .csv; normals estimated if it has none) instead of a scene file")
-    p.add_argument("--bounds", help="with --points: the workspace as low then high, e.g. 0,0,1,1; write --bounds=-1,... when the first number is negative (default: the cloud's box grown by 10%% of its largest side)")
+    p.add_argument(
+        "--points", help="plan among the points of a cloud file (.ply, .pcd, .npy, .xyz, .txt, .csv; normals estimated if it has none) instead of a scene file"
+    )
+    p.add_argument(
+        "--bounds",
+        help="with --points: the workspace as low then high, e.g. 0,0,1,1; write --bounds=-1,... when the first number is negative (default: the cloud's box grown by 10%% of its largest side)",
+    )
     p.add_argument("--start", help="plan this start (with --goal) instead of the scene's problems, e.g. 0.1,0.1")
     p.add_argument("--goal", help="the goal of --start, e.g. 0.9,0.9 (an S-shape takes x,y,z or x,y,z,qx,qy,qz,qw)")
     p.add_argument("--episodes", type=int, default=10, help="problems to draw when the scene file has none")
@@ -565,7 +597,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_net(p)
     add_config_options(p, TrainConfig(), TRAIN_OPTIONS)
     p.add_argument("--resume", help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own")
-    p.add_argument("--workers", type=int, default=None, help="Ray rollout workers stepping the --num-envs environments (shared out among them) while this process learns (pip install 'pointplan[ray]'; default: one process)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="Ray rollout workers stepping the --num-envs environments (shared out among them) while this process learns (pip install 'pointplan[ray]'; default: one process)",
+    )
     p.add_argument("--address", help="an existing Ray cluster to run the rollout workers on (see docs/scaling.md)")
     p.add_argument("--sync-every", type=int, help="with --workers: learner updates between two broadcasts of the actor's weights (default: 16)")
     p.set_defaults(func=cmd_train)
@@ -574,10 +611,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add_net(p)
     p.add_argument("--problems", type=int, default=2000, help="demonstration problems (default: %(default)s)")
     p.add_argument("--epochs", type=int, default=30)
-    p.add_argument("--workers", type=int, default=1, help="Ray workers planning the demonstrations (local processes without Ray; default: %(default)s); the demonstrations equal a serial run's")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="Ray workers planning the demonstrations (local processes without Ray; default: %(default)s); the demonstrations equal a serial run's",
+    )
     p.add_argument("--address", help="an existing Ray cluster to plan the demonstrations on (see docs/scaling.md)")
     p.add_argument("--demos", help="demonstrations file (.npz): reused if it exists, written after planning otherwise")
-    p.add_argument("--dagger-rounds", type=int, default=0, help="DAgger rounds after cloning: the policy's failed rollouts labelled by Bi-RRT (default: 0, off)")
+    p.add_argument(
+        "--dagger-rounds", type=int, default=0, help="DAgger rounds after cloning: the policy's failed rollouts labelled by Bi-RRT (default: 0, off)"
+    )
     p.add_argument("--rollouts", type=int, default=400, help="DAgger: training problems attempted per round (default: %(default)s)")
     p.add_argument("--epochs-per-round", type=float, default=2.0, help="DAgger: passes over all demonstrations per round (default: %(default)s)")
     p.add_argument("--eval-episodes", type=int, default=200, help="DAgger: validation problems per round (default: %(default)s)")

@@ -112,7 +112,9 @@ def evaluate_parallel(
             bar.set_postfix(success=f"{solved[0] / solved[1]:.1%}")
 
     try:
-        records = map_ordered(_plan_and_check, range(n), workers=workers, address=address, shared=(planner, problems, robot, first_call, resolution, tolerance), on_result=tick)
+        records = map_ordered(
+            _plan_and_check, range(n), workers=workers, address=address, shared=(planner, problems, robot, first_call, resolution, tolerance), on_result=tick
+        )
         interrupted = None
     except Interrupted as stop:
         records = [stop.results[i] for i in sorted(stop.results)]

@@ -105,7 +105,16 @@ class RolloutWorker:
             t_idx = core.t.copy()
             _, term, trunc, info = core.step(actions)
             next_obs = core.observe(rng)["observation"]
-            for k, v in (("obs", obs), ("next_obs", next_obs), ("q", q), ("q_next", core.q), ("goal", goal), ("action", actions), ("action_norm", info["action_norm"]), ("collided", info["collided"])):
+            for k, v in (
+                ("obs", obs),
+                ("next_obs", next_obs),
+                ("q", q),
+                ("q_next", core.q),
+                ("goal", goal),
+                ("action", actions),
+                ("action_norm", info["action_norm"]),
+                ("collided", info["collided"]),
+            ):
                 st[k][rows, t_idx] = v
             done = term | trunc
             if done.any():

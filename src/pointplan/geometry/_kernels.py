@@ -139,5 +139,14 @@ def ray_box_compiled(o, d, c, rot, h):  # type: ignore[no-untyped-def]
     t1 = np.empty((nb, nr, nk))
     axis = np.empty((nb, nr, nk), np.int8)
     f = np.ascontiguousarray
-    _ray_box_flat(f(o, dtype=np.float64), f(np.broadcast_to(d, o.shape), dtype=np.float64), f(c, dtype=np.float64), f(rot, dtype=np.float64), f(h, dtype=np.float64), t0, t1, axis)
+    _ray_box_flat(
+        f(o, dtype=np.float64),
+        f(np.broadcast_to(d, o.shape), dtype=np.float64),
+        f(c, dtype=np.float64),
+        f(rot, dtype=np.float64),
+        f(h, dtype=np.float64),
+        t0,
+        t1,
+        axis,
+    )
     return t0, t1, axis

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Union
 
 import numpy as np
 from numpy.typing import NDArray
@@ -162,4 +161,4 @@ class PointCloud:
         return int(self.points.shape[1])
 
 
-Shape = Union[Box, Sphere, Capsule, Cylinder, Cone, Mesh, PointCloud]
+Shape = Box | Sphere | Capsule | Cylinder | Cone | Mesh | PointCloud

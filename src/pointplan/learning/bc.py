@@ -268,7 +268,14 @@ def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: D
     losses = fit_actor(actor, opt, demos, robot, env, cfg.epochs, cfg.batch_size, rng, cfg.refresh_every, progress)
     payload = policy_payload(cfg, robot.name, obs_shape, actor, scenario.horizon)
     save_checkpoint(run_dir / "bc.pt", {**payload, "bc_config": to_dict(cfg), "demo_steps": len(demos)})
-    return {"checkpoint": str(run_dir / "bc.pt"), "demo_steps": len(demos), "demo_problems": len(demos.problems), "demo_time_s": t_demos, "train_time_s": time.perf_counter() - t0 - t_demos, "final_loss": losses[-1] if losses else float("nan")}
+    return {
+        "checkpoint": str(run_dir / "bc.pt"),
+        "demo_steps": len(demos),
+        "demo_problems": len(demos.problems),
+        "demo_time_s": t_demos,
+        "train_time_s": time.perf_counter() - t0 - t_demos,
+        "final_loss": losses[-1] if losses else float("nan"),
+    }
 
 
 def policy_payload(cfg: BCConfig, robot: str, obs_shape: tuple[int, ...], actor: Actor, horizon: int) -> dict[str, Any]:

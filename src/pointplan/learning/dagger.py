@@ -100,7 +100,9 @@ def _validate(policy: Policy, scenario: Scenario, env: EnvConfig, problems: list
     return float(np.mean([r.success for r in res])), float(np.mean([r.nodes for r in res]))
 
 
-def train_dagger(cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, init_actor: str | None = None, resume: str | Path | None = None) -> dict[str, Any]:
+def train_dagger(
+    cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, init_actor: str | None = None, resume: str | Path | None = None
+) -> dict[str, Any]:
     """Behavioural cloning (from ``init_actor`` if given, else fitted here), then
     ``cfg.rounds`` DAgger rounds; checkpoints ``best.pt`` and ``last.pt`` (resumable) and
     ``metrics.csv`` in ``run_dir``, the aggregated demonstrations in ``demos.npz``."""
@@ -131,7 +133,9 @@ def train_dagger(cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, 
         demos = load_demos(demos_path, scenario)
     else:
         source = b.demos_file if b.demos_file and Path(b.demos_file).exists() else None
-        demos = load_demos(source, scenario) if source else generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address)
+        demos = (
+            load_demos(source, scenario) if source else generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address)
+        )
         save_demos(demos_path, scenario, demos, "train", b.seed)
         if init_actor:
             actor.load_state_dict(load_checkpoint(init_actor, b.device)["actor"])
@@ -160,18 +164,44 @@ def train_dagger(cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, 
             improved = val > best or (val == best and nodes < best_nodes)
             if improved:
                 best, best_nodes = val, nodes
-            row = {"round": rnd + 1, "wall_time_s": wall, "rollout_success": float(np.mean([r.success for r in results])), "labels": len(new), "demo_steps": len(demos), "val_success": val, "val_nodes": nodes, "loss": losses[-1], "rollout_env_steps": env_steps}
+            row = {
+                "round": rnd + 1,
+                "wall_time_s": wall,
+                "rollout_success": float(np.mean([r.success for r in results])),
+                "labels": len(new),
+                "demo_steps": len(demos),
+                "val_success": val,
+                "val_nodes": nodes,
+                "loss": losses[-1],
+                "rollout_env_steps": env_steps,
+            }
             log.write(row)
-            payload = {**policy_payload(b, robot.name, obs_shape, actor, scenario.horizon), "dagger_config": to_dict(cfg), "val_success": val, "wall_time_s": wall, "round": rnd + 1}
-            state = {"round": rnd + 1, "best": best, "best_nodes": best_nodes, "wall_time_s": wall, "env_steps": env_steps, "optimizer": opt.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}
+            payload = {
+                **policy_payload(b, robot.name, obs_shape, actor, scenario.horizon),
+                "dagger_config": to_dict(cfg),
+                "val_success": val,
+                "wall_time_s": wall,
+                "round": rnd + 1,
+            }
+            state = {
+                "round": rnd + 1,
+                "best": best,
+                "best_nodes": best_nodes,
+                "wall_time_s": wall,
+                "env_steps": env_steps,
+                "optimizer": opt.state_dict(),
+                "rng": rng.bit_generator.state,
+                "torch_rng": torch.get_rng_state(),
+            }
             save_checkpoint(run_dir / "last.pt", {**payload, "dagger": state})
             if improved:
                 save_checkpoint(run_dir / "best.pt", payload)
             if progress:
-                print(f"round {rnd + 1}: rollouts {row['rollout_success']:.3f}, {len(new)} expert paths, {len(demos)} steps; val success {val:.3f} (best {best:.3f}), {wall:.0f} s", flush=True)
+                print(
+                    f"round {rnd + 1}: rollouts {row['rollout_success']:.3f}, {len(new)} expert paths, {len(demos)} steps; val success {val:.3f} (best {best:.3f}), {wall:.0f} s",
+                    flush=True,
+                )
     finally:
         if pool is not None:
             pool.shutdown(cancel_futures=True)
     return {"run_dir": str(run_dir), "best_success": best, "demo_steps": len(demos), "wall_time_s": wall_before + time.perf_counter() - t0}
-
-

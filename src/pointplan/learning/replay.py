@@ -83,7 +83,17 @@ class EpisodeReplay:
     def __len__(self) -> int:
         return self.size
 
-    def add_episode(self, obs: np.ndarray, next_obs: np.ndarray, q: np.ndarray, q_next: np.ndarray, goal: np.ndarray, action: np.ndarray, action_norm: np.ndarray, collided: np.ndarray) -> None:
+    def add_episode(
+        self,
+        obs: np.ndarray,
+        next_obs: np.ndarray,
+        q: np.ndarray,
+        q_next: np.ndarray,
+        goal: np.ndarray,
+        action: np.ndarray,
+        action_norm: np.ndarray,
+        collided: np.ndarray,
+    ) -> None:
         """Store one finished episode of ``T`` transitions (arrays with leading ``T``)."""
         t = len(q)
         if t == 0:

@@ -88,7 +88,9 @@ class NumpyPointNetActor:
     about 1e-6). ``obs_in: (..., N, F)`` and ``goal_in: (..., G)`` are the network inputs
     (:func:`obs_input`, :func:`goal_input`)."""
 
-    def __init__(self, inp: tuple[np.ndarray, np.ndarray], hidden: list[tuple[np.ndarray, np.ndarray]], head: list[tuple[np.ndarray, np.ndarray]], action_dim: int) -> None:
+    def __init__(
+        self, inp: tuple[np.ndarray, np.ndarray], hidden: list[tuple[np.ndarray, np.ndarray]], head: list[tuple[np.ndarray, np.ndarray]], action_dim: int
+    ) -> None:
         self.inp = inp
         self.hidden = hidden
         self.head = head
@@ -177,5 +179,7 @@ def shipped_checkpoint(robot: str = "disc2d", observation: str | None = None) ->
     path = Path(str(files("pointplan") / "data" / name)) if name else None
     if path is None or not path.is_file():
         have = ", ".join(f"{r} with {o!r} points" for r, o in shipped_policies()) or "none"
-        raise ValueError(f"no policy ships for robot {robot!r} with {observation!r} observations (shipped: {have}); pass --checkpoint PATH, or train one with `pointplan train`")
+        raise ValueError(
+            f"no policy ships for robot {robot!r} with {observation!r} observations (shipped: {have}); pass --checkpoint PATH, or train one with `pointplan train`"
+        )
     return path

@@ -44,4 +44,16 @@ def world_observation(problem: Any, robot: Robot, observation: str, n_points: in
     return obs[keep, :3] @ rot.T + pos, obs[keep, 3:6] @ rot.T
 
 
-__all__ = ["OBSERVERS", "GlobalPoints", "InteriorPoints", "LocalRays", "Observer", "OccupancyImage", "PointSetObserver", "SurfaceNormals", "SurfacePoints", "make_observer", "world_observation"]
+__all__ = [
+    "OBSERVERS",
+    "GlobalPoints",
+    "InteriorPoints",
+    "LocalRays",
+    "Observer",
+    "OccupancyImage",
+    "PointSetObserver",
+    "SurfaceNormals",
+    "SurfacePoints",
+    "make_observer",
+    "world_observation",
+]

@@ -361,7 +361,9 @@ class PolicyPlanner:
                 # check every move of the run in one call; keep what agrees
                 tc = time.perf_counter()
                 k = len(twists)
-                new_q, collided, n = q_free(robot, world, np.stack(qs[:-1]), np.stack(twists), np.repeat(low1, k, 0), np.repeat(high1, k, 0), env.substep, clip_target=clip_target)
+                new_q, collided, n = q_free(
+                    robot, world, np.stack(qs[:-1]), np.stack(twists), np.repeat(low1, k, 0), np.repeat(high1, k, 0), env.substep, clip_target=clip_target
+                )
                 t_motion += time.perf_counter() - tc
                 for j in range(k):
                     q = new_q[j]

@@ -40,7 +40,6 @@ class Scene:
         """The packed obstacles, built once."""
         return CollisionWorld.from_shapes(self.obstacles, self.dim)
 
-
     #: whether obstacles move with time (see :class:`DynamicScene`)
     dynamic = False
 

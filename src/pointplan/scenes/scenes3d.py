@@ -149,7 +149,9 @@ class YCB3DScenario(Scenario3D):
 
     name = "ycb3d"
 
-    def __init__(self, robot: str | Robot | None = None, config: BoxesConfig | None = None, objects: dict[str, object] | None = None, max_faces: int = 800) -> None:
+    def __init__(
+        self, robot: str | Robot | None = None, config: BoxesConfig | None = None, objects: dict[str, object] | None = None, max_faces: int = 800
+    ) -> None:
         super().__init__(robot, config)
         from . import ycb
 

@@ -191,9 +191,7 @@ def draw_problem(
     low, high = scene.low, scene.high
 
     # bounds (drawn unclipped so that the whole frame line shows at the axes limits)
-    ax.add_patch(
-        Rectangle(tuple(low), *(high - low), fill=False, ec=C_BOUNDS, lw=1.5, zorder=8, clip_on=False, label="_nolegend_")
-    )
+    ax.add_patch(Rectangle(tuple(low), *(high - low), fill=False, ec=C_BOUNDS, lw=1.5, zorder=8, clip_on=False, label="_nolegend_"))
     _draw_obstacles(ax, scene)
 
     # search trees: one LineCollection per tree
@@ -216,10 +214,20 @@ def draw_problem(
         if nrm is not None:
             size = float(np.max(high - low))
             ax.quiver(
-                pts[:, 0], pts[:, 1], nrm[:, 0], nrm[:, 1],
-                angles="xy", scale_units="xy", scale=1.0 / (0.035 * size),
-                width=0.003, headwidth=3.5, headlength=4, headaxislength=3.5,
-                color=C_OBS_POINTS, alpha=0.8, zorder=4,
+                pts[:, 0],
+                pts[:, 1],
+                nrm[:, 0],
+                nrm[:, 1],
+                angles="xy",
+                scale_units="xy",
+                scale=1.0 / (0.035 * size),
+                width=0.003,
+                headwidth=3.5,
+                headlength=4,
+                headaxislength=3.5,
+                color=C_OBS_POINTS,
+                alpha=0.8,
+                zorder=4,
             )
 
     # raw (unsmoothed) path, then the final path
@@ -234,9 +242,7 @@ def draw_problem(
         ax.plot(final[:, 0], final[:, 1], "o", ms=3.5, mfc="white", mec=C_PATH, mew=1.0, zorder=5, label="_nolegend_")
 
     # start and goal on top
-    ax.add_patch(
-        Circle(tuple(problem.goal[:2]), goal_tolerance, fill=False, ec=C_GOAL, lw=1.0, ls="--", zorder=6, label="_nolegend_")
-    )
+    ax.add_patch(Circle(tuple(problem.goal[:2]), goal_tolerance, fill=False, ec=C_GOAL, lw=1.0, ls="--", zorder=6, label="_nolegend_"))
     _robot_patches(ax, robot, problem.start, C_START, "start")
     if robot is not None and robot.config_dim == robot.dim:
         _robot_patches(ax, robot, problem.goal, C_GOAL, "_nolegend_")
@@ -375,11 +381,21 @@ def render_grid(
             key = lab.split(" (")[0]  # one entry per kind, without per-problem counts
             if key not in legend:
                 if isinstance(h, Line2D):
-                    h = Line2D([], [], color=h.get_color(), ls=h.get_linestyle(), lw=h.get_linewidth(),
-                               marker=h.get_marker(), ms=h.get_markersize(), mfc=h.get_markerfacecolor(),
-                               mec=h.get_markeredgecolor())
+                    h = Line2D(
+                        [],
+                        [],
+                        color=h.get_color(),
+                        ls=h.get_linestyle(),
+                        lw=h.get_linewidth(),
+                        marker=h.get_marker(),
+                        ms=h.get_markersize(),
+                        mfc=h.get_markerfacecolor(),
+                        mec=h.get_markeredgecolor(),
+                    )
                 legend[key] = h
-    fig.legend(list(legend.values()), list(legend.keys()), loc="outside lower center", ncols=min(len(legend), _legend_columns(ncols)), fontsize=8, frameon=False)
+    fig.legend(
+        list(legend.values()), list(legend.keys()), loc="outside lower center", ncols=min(len(legend), _legend_columns(ncols)), fontsize=8, frameon=False
+    )
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi)

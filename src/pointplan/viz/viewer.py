@@ -229,13 +229,17 @@ def view_problem(
         clouds = [s for s in scene.obstacles if isinstance(s, PointCloud)]
         for k, s in enumerate(clouds):
             if s.dim == 3 and len(s.points):
-                server.scene.add_point_cloud(f"/obstacle_points/{k}", np.asarray(s.points), _rgb255(C_OBSTACLE_EDGE), point_size=0.006 * extent, precision="float32")
+                server.scene.add_point_cloud(
+                    f"/obstacle_points/{k}", np.asarray(s.points), _rgb255(C_OBSTACLE_EDGE), point_size=0.006 * extent, precision="float32"
+                )
 
         # ------------------------------------------------------------ start, goal, path
         def add_body(name: str, q: Array, color: str, opacity: float | None) -> Any:
             pos, wxyz = robot_pose(robot, q)
             frame = server.scene.add_frame(name, show_axes=False, position=pos, wxyz=wxyz)
-            server.scene.add_mesh_simple(f"{name}/body", np.asarray(body.vertices), np.asarray(body.faces), color=_rgb255(color), opacity=opacity, flat_shading=True)
+            server.scene.add_mesh_simple(
+                f"{name}/body", np.asarray(body.vertices), np.asarray(body.faces), color=_rgb255(color), opacity=opacity, flat_shading=True
+            )
             return frame
 
         add_body("/start", problem.start, C_START, ENDPOINT_OPACITY)
@@ -246,10 +250,14 @@ def view_problem(
 
         # ------------------------------------------------------------ moving robot and GUI
         robot_frame = add_body("/robot", timed[0], C_START, None)
-        points_handle = server.scene.add_point_cloud("/points", np.zeros((1, 3)), _rgb255(C_POINTS), point_size=0.008 * extent, precision="float32", point_shape="circle", visible=False)
+        points_handle = server.scene.add_point_cloud(
+            "/points", np.zeros((1, 3)), _rgb255(C_POINTS), point_size=0.008 * extent, precision="float32", point_shape="circle", visible=False
+        )
 
         title = problem.tag or scene.name or "problem"
-        server.gui.add_markdown(f"**{title}**  \n{robot.name}, {n_steps} time step{'s' if n_steps != 1 else ''}" + ("  \nmoving obstacles" if scene.dynamic else ""))
+        server.gui.add_markdown(
+            f"**{title}**  \n{robot.name}, {n_steps} time step{'s' if n_steps != 1 else ''}" + ("  \nmoving obstacles" if scene.dynamic else "")
+        )
         slider = server.gui.add_slider("time step", min=0, max=max(n_steps - 1, 0), step=1, initial_value=0, disabled=n_steps < 2)
         play = server.gui.add_checkbox("play", initial_value=False, disabled=n_steps < 2)
         lock = threading.Lock()
@@ -300,7 +308,12 @@ def view_problem(
         raise
 
     shown = "localhost" if host in ("0.0.0.0", "::", "") else host
-    print(f"pointplan viewer: open http://{shown}:{server.get_port()}  ({n_steps} time steps; Ctrl-C to stop)" if block else f"pointplan viewer: open http://{shown}:{server.get_port()}", flush=True)
+    print(
+        f"pointplan viewer: open http://{shown}:{server.get_port()}  ({n_steps} time steps; Ctrl-C to stop)"
+        if block
+        else f"pointplan viewer: open http://{shown}:{server.get_port()}",
+        flush=True,
+    )
     if not block:
         return server
     try:
