@@ -279,7 +279,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         for rec in report.records:
             paths.append({"success": bool(rec.success), "path": np.asarray(rec.path).tolist()})
         out: dict[str, Any] = {"metrics": report.metrics(), "problems": paths}
-        if getattr(report, "interrupted", None):
+        if report.interrupted:
             out["interrupted"] = {"finished": report.interrupted[0], "problems": report.interrupted[1]}
         _write_json(args.json, out)
     if getattr(report, "interrupted", None):

@@ -61,7 +61,7 @@ class RolloutWorker:
         self.source.reset(range(num_envs), self.rng)
         self.obs = self.core.observe(self.rng)["observation"]
         e, h, cdim, tdim = num_envs, self.core.horizon, self.robot.config_dim, self.robot.twist_dim
-        self.st = {
+        self.st: dict[str, np.ndarray] = {
             "obs": np.zeros((e, h) + obs_shape, np.float32),
             "next_obs": np.zeros((e, h) + obs_shape, np.float32),
             "q": np.zeros((e, h, cdim)),

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ..geometry.collision import CollisionWorld
 from ..observers import make_observer
@@ -200,7 +200,7 @@ class BatchedCore:
     def reward(self, action_norm: Array, collided: Bool, success: Bool) -> Array:
         return step_reward(self.config, action_norm, collided, success)
 
-    def step(self, actions: Array) -> tuple[Array, Bool, Bool, dict[str, Any]]:
+    def step(self, actions: ArrayLike) -> tuple[Array, Bool, Bool, dict[str, Any]]:
         """Apply actions ``(E, twist_dim)`` in [-1, 1]: returns reward, terminated,
         truncated and per-environment info arrays. Observations come from ``observe``."""
         a = np.clip(np.asarray(actions, np.float64).reshape(self.num_envs, self.robot.twist_dim), -1.0, 1.0)

@@ -69,7 +69,7 @@ class PlanningEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
         self.core = BatchedCore(_resolve(scenario, robot), 1, self.config)
         self.robot = self.core.robot
         self.render_mode = render_mode
-        self.observation_space = spaces.Dict(
+        self.observation_space = spaces.Dict(  # type: ignore[assignment]  # (gymnasium's Dict is not generic in its value type)
             {"observation": self.core.observer.space, "achieved_goal": _goal_space(self.core), "desired_goal": _goal_space(self.core)}
         )
         k = self.robot.twist_dim
@@ -116,7 +116,7 @@ class PlanningEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
         return render_rgb(self.problem, self.robot, self.core.q[0])
 
 
-class PlanningVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float32], NDArray[np.float32]]):
+class PlanningVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float32], NDArray[Any]]):
     """``num_envs`` environments, each in its own workspace, stepping in one batched call.
 
     Autoreset is "same step": when an episode ends, the returned observation already

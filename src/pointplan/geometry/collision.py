@@ -186,6 +186,7 @@ class CollisionWorld:
         caps = [s for s in shapes if isinstance(s, Capsule)]
         cyls = [s for s in shapes if isinstance(s, Cylinder)]
         cones = [s for s in shapes if isinstance(s, Cone)]
+        coal_shapes: list[Shape] = [*caps, *cyls, *cones]
         meshes = [s for s in shapes if isinstance(s, Mesh)]
         clouds = [s for s in shapes if isinstance(s, PointCloud)]
         for s in shapes:
@@ -222,7 +223,7 @@ class CollisionWorld:
             con_half=np.array([c.length / 2 for c in cones], dtype=np.float64),
             cloud_trees=[tree],
             coal_objects=[coal_objs],
-            shapes=[list(caps) + list(cyls) + list(cones)],
+            shapes=[coal_shapes],
             coal_items=[
                 [(g, tf, *_bounding_sphere(m), m) for m, (g, tf) in zip(meshes, coal_objs)]
                 + ([(*_coal_primitive(sh), *_bounding_sphere(sh), None) for sh in list(caps) + list(cyls) + list(cones)] if d == 3 else [])

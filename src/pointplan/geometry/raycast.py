@@ -89,7 +89,7 @@ class RayHits:
 
 
 # ---------------------------------------------------------------------------- intervals
-def _slab(o: Array, d: Array, lo: Array, hi: Array) -> tuple[Array, Array]:
+def _slab(o: Array, d: Array, lo: Array | float, hi: Array | float) -> tuple[Array, Array]:
     """Parameters ``t`` with ``lo <= o + t d <= hi`` as an interval (``(inf, -inf)`` if
     empty); ``d`` is a component of a unit vector."""
     par = np.abs(d) < _PAR
@@ -354,7 +354,7 @@ def _intersector_class() -> Any:
     try:
         from trimesh.ray.ray_pyembree import RayMeshIntersector
     except ImportError:  # pragma: no cover - embreex is a dependency here
-        from trimesh.ray.ray_triangle import RayMeshIntersector
+        from trimesh.ray.ray_triangle import RayMeshIntersector  # type: ignore[assignment]
     return RayMeshIntersector
 
 
@@ -375,7 +375,7 @@ def _mesh_set(meshes: Sequence[Mesh]) -> _MeshSet:
             tm.invert()
         parts.append(tm)
         solid.append(np.full(len(tm.faces), closed))
-    combined = parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
+    combined: Any = parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
     intersector = _intersector_class()(combined)
     intersector.intersects_first(np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0]]))  # build now
     normals = np.asarray(combined.face_normals, np.float64)

@@ -29,7 +29,7 @@ class Box:
 
     center: Array
     size: Array
-    rotation: Array = field(default=None)  # type: ignore[assignment]
+    rotation: Array = field(default=None)  # type: ignore[arg-type]  # (set in __post_init__)
 
     def __post_init__(self) -> None:
         c = _vec(self.center)
@@ -90,7 +90,7 @@ class _AxialSolid:
     center: Array
     radius: float
     length: float
-    rotation: Array = field(default=None)  # type: ignore[assignment]
+    rotation: Array = field(default=None)  # type: ignore[arg-type]  # (set in __post_init__)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "center", _vec(self.center, 3))

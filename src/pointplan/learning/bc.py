@@ -214,7 +214,7 @@ def observe_demos(demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Gen
     out = []
     for c in range(0, len(demos), chunk):
         sl = slice(c, c + chunk)
-        obs = make_observer(env.observation, robot, **kwargs)
+        obs = make_observer(env.observation or ("surface-normals" if robot.dim == 2 else "global"), robot, **kwargs)
         obs.bind([demos.problems[j].scene for j in demos.scene[sl]])
         out.append(obs.observe(demos.q[sl], rng))
     return np.concatenate(out)

@@ -46,8 +46,8 @@ class EpisodeReplay:
     def __init__(self, capacity: int, obs_shape: tuple[int, ...], config_dim: int, action_dim: int, obs_dtype: type = np.float32) -> None:
         self.capacity = int(capacity)
         c = self.capacity
-        self.obs = np.zeros((c,) + tuple(obs_shape), obs_dtype)
-        self.next_obs = np.zeros((c,) + tuple(obs_shape), obs_dtype)
+        self.obs: np.ndarray = np.zeros((c,) + tuple(obs_shape), obs_dtype)
+        self.next_obs: np.ndarray = np.zeros((c,) + tuple(obs_shape), obs_dtype)
         self.q = np.zeros((c, config_dim))
         self.q_next = np.zeros((c, config_dim))
         self.goal = np.zeros((c, config_dim))

@@ -16,7 +16,7 @@ import torch
 from torch import nn
 
 from ..envs.core import EnvConfig, goal_reached, step_reward
-from ..models.actor_critic import NetConfig, build_networks
+from ..models.actor_critic import Actor, NetConfig, build_networks
 from ..models.inputs import goal_input, obs_input
 from ..robots.base import Robot
 from .replay import Batch
@@ -78,7 +78,7 @@ class SAC:
         #: the running average of the actor (weights and encoder), or None when off
         self.actor_avg = self._new_average() if cfg.policy_avg > 0 else None
 
-    def _new_average(self) -> nn.Module:
+    def _new_average(self) -> Actor:
         avg = copy.deepcopy(self.actor).requires_grad_(False).eval()
         avg.detach_encoder = False  # its encoder is its own copy
         # (average, actor) tensor pairs, found once: state_dict tensors share storage with the
@@ -89,7 +89,7 @@ class SAC:
         return avg
 
     @property
-    def policy_actor(self) -> nn.Module:
+    def policy_actor(self) -> Actor:
         """The actor that evaluation and checkpoints use: the averaged one when kept."""
         return self.actor_avg if self.actor_avg is not None else self.actor
 
@@ -122,13 +122,13 @@ class SAC:
         not_done = self.tensor(~success)  # bootstrapping stops only on success
         alpha = self.log_alpha.exp().detach()
 
-        shared = self.critic.shared is not None
+        encoder = self.critic.shared
         with torch.no_grad():
-            h_next = self.critic.shared(next_obs) if shared else None
+            h_next = encoder(next_obs) if encoder is not None else None
             a2, logp2 = self.actor.sample(next_obs, g_next, h_next)
             q1t, q2t = self.critic_target(next_obs, g_next, a2)
             target = r + self.cfg.gamma * not_done * (torch.min(q1t, q2t) - alpha * logp2)
-        h = self.critic.shared(obs) if shared else None
+        h = encoder(obs) if encoder is not None else None
         q1, q2 = self.critic(obs, g, a, h)
         critic_loss = nn.functional.mse_loss(q1, target) + nn.functional.mse_loss(q2, target)
         self.critic_opt.zero_grad(set_to_none=True)

@@ -108,15 +108,18 @@ class NumpyPointNetActor:
         if type(enc) is not PointNetEncoder or enc.extra or not isinstance(enc.act, nn.ELU) or enc.act.alpha != 1.0:
             return None
         mods = list(actor.head)
-        linears = mods[0::2]
-        if not all(isinstance(m, nn.Linear) for m in linears) or not all(isinstance(m, nn.ELU) and m.alpha == 1.0 for m in mods[1::2]) or len(mods) % 2 != 1:
+        linears = [m for m in mods[0::2] if isinstance(m, nn.Linear)]
+        if len(linears) != len(mods[0::2]) or not all(isinstance(m, nn.ELU) and m.alpha == 1.0 for m in mods[1::2]) or len(mods) % 2 != 1:
             return None
 
         def wb(layer: nn.Linear) -> tuple[np.ndarray, np.ndarray]:
             w = layer.weight.detach().cpu().numpy().astype(np.float32).T.copy()
             return w, layer.bias.detach().cpu().numpy().astype(np.float32).copy()
 
-        return cls(wb(enc.inp), [wb(m) for m in enc.hidden], [wb(m) for m in linears], actor.action_dim)
+        hidden = [m for m in enc.hidden if isinstance(m, nn.Linear)]
+        if len(hidden) != len(enc.hidden):
+            return None
+        return cls(wb(enc.inp), [wb(m) for m in hidden], [wb(m) for m in linears], actor.action_dim)
 
     def __call__(self, obs_in: np.ndarray, goal_in: np.ndarray) -> np.ndarray:
         w, b = self.inp

@@ -245,7 +245,7 @@ class _Reader:
             center = self.vector(need("center"), at("center"), dim)
             size = self.vector(need("size"), at("size"), dim, positive=True)
             if dim == 2:
-                rot = lie.so2_exp(self.number(entry.get("angle", 0.0), at("angle")))
+                rot = lie.so2_exp(np.asarray(self.number(entry.get("angle", 0.0), at("angle"))))
             else:
                 rot = self.quaternion(entry["quaternion"], at("quaternion")) if "quaternion" in entry else np.eye(3)
             return Box(center=center, size=size, rotation=rot)
@@ -458,7 +458,7 @@ def load_scene(path: str | os.PathLike[str]) -> SceneFile:
 def load_points_scene(
     path: str | os.PathLike[str],
     dim: int | None = None,
-    bounds: tuple[Sequence[float], Sequence[float]] | None = None,
+    bounds: tuple[Sequence[float] | np.ndarray, Sequence[float] | np.ndarray] | None = None,
     pad: float = 0.1,
     k: int = DEFAULT_K,
     viewpoint: Sequence[float] | None = None,

@@ -17,6 +17,7 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
+from matplotlib.layout_engine import ConstrainedLayoutEngine
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Polygon, Rectangle
 from numpy.typing import NDArray
@@ -51,7 +52,9 @@ C_TREES = ("#66bd63", "#f4a261", "#74add1", "#e78ac3")
 # ---------------------------------------------------------------------------- helpers
 def _new_figure(figsize: tuple[float, float], dpi: float) -> Figure:
     fig = Figure(figsize=figsize, dpi=dpi, layout="constrained")
-    fig.get_layout_engine().set(w_pad=0.1, h_pad=0.1)  # inches kept free around the edge
+    engine = fig.get_layout_engine()
+    assert isinstance(engine, ConstrainedLayoutEngine)
+    engine.set(w_pad=0.1, h_pad=0.1)  # inches kept free around the edge
     FigureCanvasAgg(fig)
     return fig
 
@@ -134,9 +137,9 @@ def _observation_to_world(observation: Array, robot: Robot | None, start: Array)
 def _tree_segments(nodes: Array, parents: Array) -> Array:
     """Edges ``(k, 2, 2)`` from every non-root node to its parent."""
     nodes = np.asarray(nodes, np.float64)
-    parents = np.asarray(parents, np.int64).reshape(-1)
-    child = np.flatnonzero(parents >= 0)
-    return np.stack([nodes[child, :2], nodes[parents[child], :2]], 1)
+    parent_of = np.asarray(parents, np.int64).reshape(-1)
+    child = np.flatnonzero(parent_of >= 0)
+    return np.stack([nodes[child, :2], nodes[parent_of[child], :2]], 1)
 
 
 def _result_summary(result: Any) -> str:
@@ -202,7 +205,7 @@ def draw_problem(
             segs = _tree_segments(nodes, parents)
             color = C_TREES[i % len(C_TREES)]
             if len(segs):
-                ax.add_collection(LineCollection(segs, colors=color, linewidths=0.6, alpha=0.8, zorder=2))
+                ax.add_collection(LineCollection(list(segs), colors=color, linewidths=0.6, alpha=0.8, zorder=2))
             # a proxy line carries the legend entry (LineCollection legends look odd)
             ax.plot([], [], color=color, lw=1.0, label=f"{names[i]} ({len(np.asarray(nodes))} nodes)")
 

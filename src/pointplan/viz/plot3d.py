@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from matplotlib.animation import PillowWriter
@@ -124,7 +124,7 @@ def _box_faces(center: Array, rotation: Array, half: Array) -> Array:
     return corners[idx]
 
 
-def _revolution(radii: Sequence[float], zs: Sequence[float], center: Array, rotation: Array, n: int = N_AROUND) -> Array:
+def _revolution(radii: Sequence[float] | Array, zs: Sequence[float] | Array, center: Array, rotation: Array, n: int = N_AROUND) -> Array:
     """Quads ``(F, 4, 3)`` of the surface swept by the profile ``(radius, z)`` (rows, in
     order) around the local z axis, placed in the world by ``rotation`` and ``center``.
     A row of radius 0 collapses to a point (caps, apexes and poles)."""
@@ -518,7 +518,7 @@ def render_grid_3d(
     for i, pr in enumerate(problems):
         r, c = divmod(i, cols)
         rect = (c / cols, (legend_h + (rows - 1 - r) * GRID_CELL) / height, 1.0 / cols, 0.94 * GRID_CELL / height)
-        ax = fig.add_axes(rect, projection="3d")
+        ax = cast(Axes3D, fig.add_axes(rect, projection="3d"))
         p = _as_path(paths[i], robot) if paths is not None else None
         any_path |= p is not None
         title = titles[i] if titles is not None else (_title_of(pr) or f"problem {i}")
@@ -553,7 +553,7 @@ def render_rollout_gif(
     scene = problem.scene
     low, high = scene.low, scene.high
     fig = _new_figure((5.0, 5.0), GIF_DPI)
-    ax = fig.add_axes((0.0, 0.07, 1.0, 0.86), projection="3d")
+    ax = cast(Axes3D, fig.add_axes((0.0, 0.07, 1.0, 0.86), projection="3d"))
     draw_scene_3d(ax, [] if obstacles_at is not None else scene.obstacles, low, high)
     ax.view_init(elev=elev, azim=azim)
     _draw_endpoints(ax, robot, None, problem.goal)
@@ -561,7 +561,7 @@ def render_rollout_gif(
     name = _title_of(problem)
     out = Path(output)
     out.parent.mkdir(parents=True, exist_ok=True)
-    writer = PillowWriter(fps=fps)
+    writer = PillowWriter(fps=fps)  # type: ignore[arg-type]  # (any number works; the stubs say int)
     moving: list[Any] = []
     with writer.saving(fig, str(out), dpi=GIF_DPI):
         for t, q in enumerate(p):

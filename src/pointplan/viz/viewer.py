@@ -286,7 +286,7 @@ def view_problem(
         def player() -> None:
             while not stopped.wait(1.0 / PLAY_FPS):
                 if play.value and n_steps > 1:
-                    slider.value = (int(slider.value) + 1) % n_steps
+                    slider.value = (int(slider.value) + 1) % n_steps  # type: ignore[misc]  # (viser's stubs: settable at run time)
 
         thread = threading.Thread(target=player, name="pointplan-viewer-play", daemon=True)
         thread.start()
