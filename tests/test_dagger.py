@@ -6,6 +6,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from pointplan.config import from_dict
 from pointplan.learning.bc import BCConfig, generate_demos, load_demos, save_demos
@@ -15,6 +16,8 @@ from pointplan.models.checkpoint import load_checkpoint
 from pointplan.models.encoders import EncoderConfig
 from pointplan.models.policy import Policy
 from pointplan.scenes.scenarios import Narrow2DScenario, make_scenario
+
+pytestmark = pytest.mark.slow  # behavioural cloning and DAgger train networks
 
 SMALL = NetConfig(EncoderConfig(width=16, layers=2), head_width=16, head_layers=2, critic_action="pooled", shared_encoder=True)
 

@@ -100,6 +100,7 @@ def test_relabelled_reward_equals_env_reward() -> None:
         assert term == success[i]
 
 
+@pytest.mark.slow
 def test_sac_her_learns_empty_2d(tmp_path: Path) -> None:
     """SAC + HER reaches 90% on the obstacle-free square within a small budget."""
     cfg = TrainConfig(

@@ -23,7 +23,8 @@ from pointplan.scenes.scenarios import make_scenario
 from pointplan.scenes.scene import DynamicScene
 from pointplan.scenes.scenes3d import SCENARIOS_3D, SlotConfig, SlotScenario
 
-SCENES = list(SCENARIOS_3D)
+#: 3D-YCB loads and decimates meshes: its cases are slow
+SCENES = [pytest.param(s, marks=pytest.mark.slow) if s == "ycb3d" else s for s in SCENARIOS_3D]
 STATIC = [s for s in SCENES if s != "dynamic3d"]
 
 
