@@ -30,6 +30,7 @@ from ..scenes.scenarios import Scenario, make_scenario
 from .bc import (
     BCConfig,
     DemoJob,
+    Demos,
     demo_pool,
     demos_from_paths,
     fit_actor,
@@ -100,14 +101,63 @@ def _validate(policy: Policy, scenario: Scenario, env: EnvConfig, problems: list
     return float(np.mean([r.success for r in res])), float(np.mean([r.nodes for r in res]))
 
 
+def _resume(path: str | Path, device: str, actor: Actor, opt: torch.optim.Optimizer, rng: np.random.Generator) -> dict[str, Any]:
+    """Restore the actor, the optimiser and the random streams of a DAgger ``last.pt``;
+    returns its counters (``round``, ``best``, ...)."""
+    state = load_checkpoint(path, device)
+    actor.load_state_dict(state["actor"])
+    d = state["dagger"]
+    opt.load_state_dict(d["optimizer"])
+    rng.bit_generator.state = d["rng"]
+    torch.set_rng_state(d["torch_rng"])
+    return dict(d)
+
+
+def _first_demos(b: BCConfig, scenario: Scenario, demos_path: Path, progress: bool) -> Demos:
+    """The cloning demonstrations (from ``b.demos_file`` when it exists, else planned), also
+    written to the run's ``demos.npz``."""
+    source = b.demos_file if b.demos_file and Path(b.demos_file).exists() else None
+    demos = load_demos(source, scenario) if source else generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address)
+    save_demos(demos_path, scenario, demos, "train", b.seed)
+    return demos
+
+
+def _save(run_dir: Path, payload: dict[str, Any], counters: dict[str, Any], opt: torch.optim.Optimizer, rng: np.random.Generator, improved: bool) -> None:
+    """``last.pt`` with the state to resume from; ``best.pt`` when validation improved."""
+    state = {**counters, "optimizer": opt.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}
+    save_checkpoint(run_dir / "last.pt", {**payload, "dagger": state})
+    if improved:
+        save_checkpoint(run_dir / "best.pt", payload)
+
+
+def _roll_out_and_label(
+    cfg: DaggerConfig, scenario: Scenario, policy: Policy, env: EnvConfig, rnd: int, pool: Any, progress: bool
+) -> tuple[list[Any], list[Any]]:
+    """Round ``rnd``'s rollouts of the policy on fresh training problems, and the expert's
+    paths from states of the failed ones."""
+    from ..planners.policy import rollout_batch
+
+    b = cfg.bc
+    probs = [scenario.problem("train", _rollout_index(b.seed, rnd, cfg.rollouts, i), seed=b.seed) for i in range(cfg.rollouts)]
+    results = rollout_batch(policy, scenario.robot, env, probs, scenario.horizon, seed=b.seed * 1000 + rnd)
+    jobs = _label_jobs(cfg, scenario, rnd, results)
+    return results, plan_demos(jobs, pool, progress, desc=f"round {rnd + 1}: expert labels")
+
+
+def _print_round(row: dict[str, Any], best: float) -> None:
+    print(
+        f"round {row['round']}: rollouts {row['rollout_success']:.3f}, {row['labels']} expert paths, {row['demo_steps']} steps; "
+        f"val success {row['val_success']:.3f} (best {best:.3f}), {row['wall_time_s']:.0f} s",
+        flush=True,
+    )
+
+
 def train_dagger(
     cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, init_actor: str | None = None, resume: str | Path | None = None
 ) -> dict[str, Any]:
     """Behavioural cloning (from ``init_actor`` if given, else fitted here), then
     ``cfg.rounds`` DAgger rounds; checkpoints ``best.pt`` and ``last.pt`` (resumable) and
     ``metrics.csv`` in ``run_dir``, the aggregated demonstrations in ``demos.npz``."""
-    from ..planners.policy import rollout_batch
-
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     b = cfg.bc
@@ -122,21 +172,12 @@ def train_dagger(
     demos_path = run_dir / "demos.npz"
     start_round, best, best_nodes, wall_before, env_steps = 0, -1.0, float("inf"), 0.0, 0
     if resume is not None:
-        state = load_checkpoint(resume, b.device)
-        actor.load_state_dict(state["actor"])
-        d = state["dagger"]
-        opt.load_state_dict(d["optimizer"])
-        rng.bit_generator.state = d["rng"]
-        torch.set_rng_state(d["torch_rng"])
+        d = _resume(resume, b.device, actor, opt, rng)
         start_round, best, best_nodes, wall_before = int(d["round"]), float(d["best"]), float(d["best_nodes"]), float(d["wall_time_s"])
         env_steps = int(d["env_steps"])
         demos = load_demos(demos_path, scenario)
     else:
-        source = b.demos_file if b.demos_file and Path(b.demos_file).exists() else None
-        demos = (
-            load_demos(source, scenario) if source else generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address)
-        )
-        save_demos(demos_path, scenario, demos, "train", b.seed)
+        demos = _first_demos(b, scenario, demos_path, progress)
         if init_actor:
             actor.load_state_dict(load_checkpoint(init_actor, b.device)["actor"])
         else:
@@ -148,12 +189,9 @@ def train_dagger(
     t0 = time.perf_counter()
     try:
         for rnd in range(start_round, cfg.rounds):
-            probs = [scenario.problem("train", _rollout_index(b.seed, rnd, cfg.rollouts, i), seed=b.seed) for i in range(cfg.rollouts)]
             actor.eval()
-            results = rollout_batch(policy, robot, env, probs, scenario.horizon, seed=b.seed * 1000 + rnd)
+            results, new = _roll_out_and_label(cfg, scenario, policy, env, rnd, pool, progress)
             env_steps += sum(r.nodes for r in results)
-            jobs = _label_jobs(cfg, scenario, rnd, results)
-            new = plan_demos(jobs, pool, progress, desc=f"round {rnd + 1}: expert labels")
             demos = demos_from_paths(scenario, "train", b.seed, demos.paths + new)
             save_demos(demos_path, scenario, demos, "train", b.seed)
             actor.train()
@@ -183,24 +221,10 @@ def train_dagger(
                 "wall_time_s": wall,
                 "round": rnd + 1,
             }
-            state = {
-                "round": rnd + 1,
-                "best": best,
-                "best_nodes": best_nodes,
-                "wall_time_s": wall,
-                "env_steps": env_steps,
-                "optimizer": opt.state_dict(),
-                "rng": rng.bit_generator.state,
-                "torch_rng": torch.get_rng_state(),
-            }
-            save_checkpoint(run_dir / "last.pt", {**payload, "dagger": state})
-            if improved:
-                save_checkpoint(run_dir / "best.pt", payload)
+            counters = {"round": rnd + 1, "best": best, "best_nodes": best_nodes, "wall_time_s": wall, "env_steps": env_steps}
+            _save(run_dir, payload, counters, opt, rng, improved)
             if progress:
-                print(
-                    f"round {rnd + 1}: rollouts {row['rollout_success']:.3f}, {len(new)} expert paths, {len(demos)} steps; val success {val:.3f} (best {best:.3f}), {wall:.0f} s",
-                    flush=True,
-                )
+                _print_round(row, best)
     finally:
         if pool is not None:
             pool.shutdown(cancel_futures=True)
