@@ -218,3 +218,123 @@ def test_training_progress_bar_stops_at_its_total(tmp_path: Path, capsys: pytest
     assert main(["train", "--steps", "302", "--eval-every", "302", *TINY_TRAIN, "--run-dir", str(tmp_path)]) == 0
     err = capsys.readouterr().err
     assert "302/302" in err and "304/302" not in err
+
+
+# ---------------------------------------------------------------------------- option checks and messages
+@pytest.mark.parametrize(
+    ("args", "option", "why"),
+    [
+        (["eval", "--episodes", "0"], "--episodes", "at least 1"),
+        (["eval", "--episodes", "-3"], "--episodes", "at least 1"),
+        (["eval", "--max-nodes", "-5"], "--max-nodes", "at least 1"),
+        (["eval", "--seed", "-1"], "--seed", "0 or more"),
+        (["plan", "--episodes", "0"], "--episodes", "at least 1"),
+        (["train", "--num-envs", "0"], "--num-envs", None),
+    ],
+)
+def test_bad_counts_are_refused_naming_the_option(args: list[str], option: str, why: str | None, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as e:
+        main([*args, "--quiet"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument {option}" in err and (why is None or why in err)
+
+
+def _scene_file(tmp_path: Path, problems: list[dict[str, object]]) -> Path:
+    doc = {
+        "format": "pointplan-scene",
+        "version": 1,
+        "dim": 2,
+        "name": "wall",
+        "bounds": {"low": [0.0, 0.0], "high": [1.0, 1.0]},
+        "robot": "disc2d",
+        "obstacles": [{"type": "box", "center": [0.5, 0.4], "size": [0.1, 0.8]}],
+        "problems": problems,
+    }
+    path = tmp_path / "wall.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_a_start_or_goal_in_collision_is_reported(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scene = _scene_file(
+        tmp_path,
+        [{"start": [0.2, 0.3], "goal": [0.8, 0.3], "tag": "fine"}, {"start": [0.5, 0.3], "goal": [0.8, 0.3], "tag": "inside"}],
+    )
+    out = tmp_path / "out.json"
+    main(["plan", "--scene", str(scene), "--json", str(out), "--quiet"])
+    text = capsys.readouterr().out
+    assert "start/goal in collision" in text and "inside: start in collision" in text
+    data = json.loads(out.read_text())
+    assert data["metrics"]["invalid_problems"] == 1
+    assert [p["invalid"] for p in data["problems"]] == ["", "start in collision"]
+    # one problem given on the command line: an error
+    assert main(["plan", "--scene", str(scene), "--start", "0.2,0.3", "--goal", "0.5,0.5", "--quiet"]) == 2
+    assert "goal in collision" in capsys.readouterr().err
+
+
+def test_checkpoint_with_a_planner_that_takes_none_is_an_error(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["eval", "--planner", "birrt", "--checkpoint", "x.pt", "--episodes", "1", "--quiet"]) == 2
+    assert "--checkpoint is for --planner policy or hybrid" in capsys.readouterr().err
+
+
+def test_eval_json_names_the_planner(tmp_path: Path) -> None:
+    out = tmp_path / "m.json"
+    assert main(["eval", "--planner", "straight", "--episodes", "2", "--json", str(out), "--quiet"]) == 0
+    assert json.loads(out.read_text())["planner"] == "straight"
+
+
+def test_plan_draws_every_problem(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    import pointplan.viz.plot2d as plot2d
+
+    drawn: list[int] = []
+    monkeypatch.setattr(plot2d, "render_grid", lambda problems, *a, **k: drawn.append(len(problems)))
+    scene = ROOT / "examples" / "scenes" / "narrow_example.json"
+    assert main(["plan", "--scene", str(scene), "-o", str(tmp_path / "p.png"), "--quiet"]) == 0
+    assert drawn == [2] and "(2 problems)" in capsys.readouterr().out
+
+
+def test_render_draws_the_points_the_policy_sees(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import pointplan
+    import pointplan.viz.plot2d as plot2d
+    from pointplan.models.checkpoint import load_checkpoint, save_checkpoint
+
+    data = load_checkpoint(Path(pointplan.__file__).parent / "data" / "narrow2d_policy.pt")
+    data = {k: v for k, v in data.items() if k not in ("format", "version")}
+    data.update(n_points=32, obs_shape=[32, 4])  # PointNet takes any number of points
+    save_checkpoint(tmp_path / "p32.pt", data)
+    seen: dict[str, object] = {}
+    monkeypatch.setattr(plot2d, "render_problem", lambda *a, **k: seen.update(k))
+    assert main(["render", "--planner", "policy", "--checkpoint", str(tmp_path / "p32.pt"), "-o", str(tmp_path / "r.png")]) == 0
+    assert seen["n_points"] == 32 and seen["observer_name"] == "surface-normals"
+
+
+def test_train_and_bc_print_one_line_and_write_json_on_request(tmp_path: Path, captured_train: dict[str, object], capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "t.json"
+    assert main(["train", "--quiet", "--steps", "300", "--json", str(out)]) == 0
+    lines = [x for x in capsys.readouterr().out.splitlines() if not x.startswith("wrote")]
+    assert len(lines) == 1 and lines[0].startswith("best validation success")
+    assert json.loads(out.read_text())["steps"] == 300
+    from pointplan.cli import _bc_line
+
+    line = _bc_line({"checkpoint": "r/bc.pt", "demo_steps": 10, "demo_problems": 2, "demo_time_s": 1.0, "train_time_s": 2.0, "final_loss": 0.5})
+    assert "\n" not in line and "r/bc.pt" in line
+
+
+def test_subcommands_have_descriptions_and_options_have_help(capsys: pytest.CaptureFixture[str]) -> None:
+    from pointplan.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, type(parser._subparsers._group_actions[0])))  # type: ignore[union-attr]
+    for name, p in sub.choices.items():
+        assert p.description, name
+        for action in p._actions:
+            if action.option_strings and action.dest != "help":
+                assert action.help, f"{name} {action.option_strings}"
+    with pytest.raises(SystemExit):
+        main(["eval", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "claims disagree" in text and "re-checked" in text
+    with pytest.raises(SystemExit):
+        main(["eval", "--help"])
+    assert "shipped policy" in " ".join(capsys.readouterr().out.split())

@@ -86,8 +86,8 @@ def _get_path(obj: Any, path: str) -> Any:
     return obj
 
 
-def _field_hint(cls: type, path: str) -> tuple[Any, str]:
-    """The type hint and the documentation of the field at dotted ``path`` of ``cls``."""
+def _field_hint(cls: type, path: str) -> tuple[Any, str, dict[str, Any]]:
+    """The type hint, the documentation and the metadata of the field at dotted ``path``."""
     head, _, rest = path.partition(".")
     hint = typing.get_type_hints(cls)[head]
     if rest:
@@ -95,26 +95,47 @@ def _field_hint(cls: type, path: str) -> tuple[Any, str]:
         if inner is None:
             raise ValueError(f"{cls.__name__}.{head} is not a dataclass")
         return _field_hint(inner, rest)
-    return hint, field_docs(cls).get(head, "")
+    meta = next(f.metadata for f in dataclasses.fields(cls) if f.name == head)  # type: ignore[arg-type]
+    return hint, field_docs(cls).get(head, ""), dict(meta)
+
+
+def _at_least(kind: type, low: float) -> Any:
+    """An argparse type: a number of ``kind`` no smaller than ``low``."""
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, got {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be at least {kind(low)}, got {value}")
+        return value
+
+    parse.__name__ = kind.__name__  # argparse names the type in its messages
+    return parse
 
 
 def add_config_options(parser: argparse.ArgumentParser, defaults: Any, paths: dict[str, str]) -> None:
     """Add ``--flag`` options for fields of the dataclass instance ``defaults``.
 
     ``paths`` maps each flag (without dashes) to a dotted field path (``"lr": "sac.lr"``).
-    Types, help and the default shown come from the dataclass; the parsed value is ``None``
-    when the option is not given, so :func:`given_options` sees what the user set.
+    Types, help and the default shown come from the dataclass (integers are at least 0, or
+    at least ``field(metadata={"min": ...})``); the parsed value is ``None`` when the
+    option is not given, so :func:`given_options` sees what the user set.
     """
     for flag, path in paths.items():
-        hint, doc = _field_hint(type(defaults), path)
+        hint, doc, meta = _field_hint(type(defaults), path)
         kind = _scalar_type(hint)
+        parse: Any = kind
+        if "min" in meta or kind is int:
+            parse = _at_least(kind, meta.get("min", 0))
         default = _get_path(defaults, path)
         text = doc.replace("``", "") if doc else path.replace("_", " ")
         text = text.replace("%", "%%") + f" (default: {default})"
         if kind is bool:
             parser.add_argument(f"--{flag}", dest=path, action=argparse.BooleanOptionalAction, default=None, help=text)
         else:
-            parser.add_argument(f"--{flag}", dest=path, type=kind, default=None, metavar=flag.upper().replace("-", "_"), help=text)
+            parser.add_argument(f"--{flag}", dest=path, type=parse, default=None, metavar=flag.upper().replace("-", "_"), help=text)
 
 
 def given_options(args: argparse.Namespace, paths: dict[str, str]) -> dict[str, Any]:

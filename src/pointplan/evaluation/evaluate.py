@@ -157,6 +157,8 @@ class EpisodeRecord:
     #: wall time of ``planner.plan``, seconds (measured by the evaluator)
     time_s: float
     path: Array = field(repr=False)
+    #: why the problem cannot be solved as posed ("start in collision", ...), or ""
+    invalid: str = ""
 
 
 def _mean(xs: Sequence[float]) -> float:
@@ -198,6 +200,7 @@ class EvalReport:
             "time_mean_s": _mean(times),
             "time_median_s": _median(times),
             "planner_claims_disagree": sum(1 for x in r if x.success != x.claimed_success),
+            "invalid_problems": sum(1 for x in r if x.invalid),
         }
 
 
@@ -243,6 +246,14 @@ def evaluate(
     return report
 
 
+def endpoint_fault(robot: Robot, problem: Problem) -> str:
+    """ "start in collision", "goal in collision", "start and goal in collision" (against
+    the obstacles at time 0), or "" when both are free."""
+    hit = np.asarray(robot.collides(problem.scene.world, np.stack([problem.start, problem.goal])), bool)
+    which = [name for name, h in zip(("start", "goal"), hit) if h]
+    return f"{' and '.join(which)} in collision" if which else ""
+
+
 def plan_and_check(planner: Any, problem: Problem, robot: Robot, resolution: float = 0.01, tolerance: float = 0.07) -> EpisodeRecord:
     """One problem planned and its path re-checked."""
     t0 = time.perf_counter()
@@ -251,6 +262,7 @@ def plan_and_check(planner: Any, problem: Problem, robot: Robot, resolution: flo
     path = np.asarray(result.path, np.float64)
     ok = len(path) > 0 and bool(check_path(robot, problem, path, resolution, tolerance))
     return EpisodeRecord(
+        invalid=endpoint_fault(robot, problem),
         tag=problem.tag,
         success=bool(ok),
         claimed_success=bool(result.success),
@@ -276,6 +288,7 @@ _ROWS = [
     ("time_mean_s", "time s (mean)"),
     ("time_median_s", "time s (median)"),
     ("planner_claims_disagree", "claims disagree"),
+    ("invalid_problems", "start/goal in collision"),
 ]
 
 

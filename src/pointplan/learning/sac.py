@@ -8,7 +8,7 @@ the critics, the actor and the temperature.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -29,7 +29,7 @@ class SACConfig:
     #: Adam step size of actor, critics and temperature
     lr: float = 3e-4
     #: transitions per gradient step
-    batch_size: int = 256
+    batch_size: int = field(default=256, metadata={"min": 1})
     #: discount factor
     gamma: float = 0.99
     #: rate of the target critics' running average
@@ -41,7 +41,7 @@ class SACConfig:
     #: share of sampled transitions whose goal is relabelled (hindsight)
     her_ratio: float = 0.8
     #: replay buffer capacity in transitions
-    buffer_size: int = 1_000_000
+    buffer_size: int = field(default=1_000_000, metadata={"min": 1})
     #: critic-only updates before the actor and temperature start to move (useful when the
     #: actor starts from behavioural cloning and the critic from scratch)
     actor_delay: int = 0

@@ -44,17 +44,17 @@ class TrainConfig:
     observation: str = "surface-normals"
     n_points: int = 64
     #: environments stepping together
-    num_envs: int = 16
+    num_envs: int = field(default=16, metadata={"min": 1})
     #: environment transitions to collect
-    total_steps: int = 200_000
+    total_steps: int = field(default=200_000, metadata={"min": 1})
     #: transitions of uniform random actions before the policy acts
     warmup_steps: int = 1_000
     #: gradient steps per collected transition (the paper: 1)
     updates_per_step: float = 0.25
     #: environment transitions between two validations (and checkpoints)
-    eval_every: int = 10_000
+    eval_every: int = field(default=10_000, metadata={"min": 1})
     #: validation problems (the ``val`` split)
-    eval_episodes: int = 100
+    eval_episodes: int = field(default=100, metadata={"min": 1})
     #: stop early once the validation success reaches this
     target_success: float = 1.01
     #: seeds the problems, the networks and the validation set
@@ -72,7 +72,7 @@ class TrainConfig:
     #: problems; the ones it fails enter the retry pool
     mine_episodes: int = 0
     #: problems kept for retrying
-    pool_size: int = 2000
+    pool_size: int = field(default=2000, metadata={"min": 1})
     #: retries of a problem after its last failure
     pool_retries: int = 4
 
