@@ -338,3 +338,28 @@ def test_subcommands_have_descriptions_and_options_have_help(capsys: pytest.Capt
     with pytest.raises(SystemExit):
         main(["eval", "--help"])
     assert "shipped policy" in " ".join(capsys.readouterr().out.split())
+
+
+def test_bc_options_come_from_the_config_dataclasses(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    import pointplan.learning.bc as bc_mod
+    import pointplan.learning.dagger as dagger_mod
+
+    seen: dict[str, object] = {}
+    summary = {"run_dir": "r", "best_success": 0.5, "demo_steps": 3, "wall_time_s": 1.0}
+    monkeypatch.setattr(dagger_mod, "train_dagger", lambda cfg, run_dir, **kw: seen.update(cfg=cfg, run_dir=run_dir) or summary)
+    monkeypatch.setattr(
+        bc_mod,
+        "train_bc",
+        lambda cfg, run_dir, **kw: (
+            seen.update(bc=cfg) or {**summary, "checkpoint": "r/bc.pt", "demo_problems": 1, "demo_time_s": 0.0, "train_time_s": 0.0, "final_loss": 0.1}
+        ),
+    )
+    assert main(["bc", "--quiet", "--problems", "5", "--epochs", "2", "--rollouts", "7", "--dagger-rounds", "1", "--expert-max-nodes", "99"]) == 0
+    cfg = seen["cfg"]
+    assert (cfg.bc.n_problems, cfg.bc.epochs, cfg.rollouts, cfg.rounds, cfg.max_nodes) == (5, 2, 7, 1, 99)  # type: ignore[attr-defined]
+    assert main(["bc", "--quiet", "--lr", "0.01"]) == 0
+    assert seen["bc"].lr == 0.01 and seen["bc"].n_problems == 2000  # type: ignore[attr-defined]
+    assert "r/bc.pt" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["bc", "--epochs", "0"])
+    assert "argument --epochs" in capsys.readouterr().err

@@ -526,43 +526,54 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 130 if res.interrupted else 0
 
 
+#: bc options derived from DaggerConfig and its BCConfig: flag -> field path
+BC_OPTIONS = {
+    "problems": "bc.n_problems",
+    "epochs": "bc.epochs",
+    "lr": "bc.lr",
+    "batch-size": "bc.batch_size",
+    "refresh-every": "bc.refresh_every",
+    "workers": "bc.workers",
+    "demos": "bc.demos_file",
+    "rollouts": "rollouts",
+    "labels-per-failure": "labels_per_failure",
+    "epochs-per-round": "epochs_per_round",
+    "eval-episodes": "eval_episodes",
+    "expert-max-nodes": "max_nodes",
+}
+
+
 def cmd_bc(args: argparse.Namespace) -> int:
+    from .config import from_dict, given_options, replace_paths
     from .learning.bc import BCConfig, train_bc
+    from .learning.dagger import DaggerConfig, train_dagger
 
-    cfg = BCConfig(
-        env=args.env,
-        robot=args.robot,
-        observation=_default_observation(args),
-        n_points=_default_points(args),
-        n_problems=args.problems,
-        epochs=args.epochs,
-        seed=args.seed,
-        device=args.device,
-        net=_net_config(args),
-        workers=args.workers,
-        address=args.address,
-        demos_file=args.demos,
-    )
-    if args.dagger_rounds or args.resume:
-        from .learning.dagger import DaggerConfig, train_dagger
+    given = {**given_options(args, BC_OPTIONS), "bc.address": args.address}  # (the Ray cluster is this command's)
+    if args.resume:
+        from .models.checkpoint import load_checkpoint
 
-        dcfg = DaggerConfig(cfg, rounds=args.dagger_rounds, rollouts=args.rollouts, epochs_per_round=args.epochs_per_round, eval_episodes=args.eval_episodes)
-        if args.resume:
-            from .config import from_dict
-            from .models.checkpoint import load_checkpoint
-
-            data = load_checkpoint(args.resume)
-            if "dagger_config" not in data:
-                raise CLIError(f"--resume {args.resume}: not a DAgger checkpoint; resume from a DAgger run's last.pt")
-            dcfg = from_dict(DaggerConfig, data["dagger_config"])
-            if args.dagger_rounds:
-                dcfg = dataclasses.replace(dcfg, rounds=args.dagger_rounds)
-            # the Ray cluster is this command's, not the one the run started on
-            dcfg = dataclasses.replace(dcfg, bc=dataclasses.replace(dcfg.bc, address=args.address))
-        run_dir = args.run_dir or (str(Path(args.resume).parent) if args.resume else "runs/latest")
-        summary = train_dagger(dcfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume)
+        data = load_checkpoint(args.resume)
+        if "dagger_config" not in data:
+            raise CLIError(f"--resume {args.resume}: not a DAgger checkpoint; resume from a DAgger run's last.pt")
+        cfg = replace_paths(from_dict(DaggerConfig, data["dagger_config"]), given)
+        if args.dagger_rounds:
+            cfg = dataclasses.replace(cfg, rounds=args.dagger_rounds)
     else:
-        summary = train_bc(cfg, args.run_dir or "runs/latest", progress=not args.quiet)
+        bc = BCConfig(
+            env=args.env,
+            robot=args.robot,
+            observation=_default_observation(args),
+            n_points=_default_points(args),
+            seed=args.seed,
+            device=args.device,
+            net=_net_config(args),
+        )
+        cfg = replace_paths(DaggerConfig(bc, rounds=args.dagger_rounds), given)
+    if args.dagger_rounds or args.resume:
+        run_dir = args.run_dir or (str(Path(args.resume).parent) if args.resume else "runs/latest")
+        summary = train_dagger(cfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume)
+    else:
+        summary = train_bc(cfg.bc, args.run_dir or "runs/latest", progress=not args.quiet)
     print(_bc_line(summary))
     _write_json(args.json, summary)
     return 0
@@ -719,29 +730,21 @@ def _add_train_parser(sub: Any) -> None:
 
 
 def _add_bc_parser(sub: Any) -> None:
+    from .config import add_config_options
+    from .learning.dagger import DaggerConfig
+
     p = _subparser(sub, "bc", "behavioural cloning from Bi-RRT demonstrations, optionally followed by DAgger rounds")
     _add_net(p)
-    p.add_argument("--problems", type=positive_int, default=2000, help="demonstration problems (default: %(default)s)")
-    p.add_argument("--epochs", type=positive_int, default=30, help="passes over the demonstrations (default: %(default)s)")
-    p.add_argument(
-        "--workers",
-        type=positive_int,
-        default=1,
-        help="Ray workers planning the demonstrations (local processes without Ray; default: %(default)s); the demonstrations equal a serial run's",
-    )
+    add_config_options(p, DaggerConfig(), BC_OPTIONS)
     p.add_argument("--address", help="an existing Ray cluster to plan the demonstrations on (see docs/scaling.md)")
-    p.add_argument("--demos", help="demonstrations file (.npz): reused if it exists, written after planning otherwise")
     p.add_argument(
         "--dagger-rounds",
         type=non_negative_int,
         default=0,
         help="DAgger rounds after cloning: the policy's failed rollouts labelled by Bi-RRT (default: 0, off)",
     )
-    p.add_argument("--rollouts", type=positive_int, default=400, help="DAgger: training problems attempted per round (default: %(default)s)")
-    p.add_argument("--epochs-per-round", type=float, default=2.0, help="DAgger: passes over all demonstrations per round (default: %(default)s)")
-    p.add_argument("--eval-episodes", type=positive_int, default=200, help="DAgger: validation problems per round (default: %(default)s)")
     p.add_argument("--init-actor", help="DAgger: start from this checkpoint's actor instead of cloning first")
-    p.add_argument("--resume", help="DAgger: continue a run from its last.pt (--dagger-rounds sets the new total)")
+    p.add_argument("--resume", help="DAgger: continue a run from its last.pt (--dagger-rounds sets the new total; options given replace the run's own)")
     p.add_argument("--json", help="also write the summary to this JSON file")
     p.set_defaults(func=cmd_bc)
 

@@ -222,22 +222,28 @@ def observe_demos(demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Gen
 
 @dataclass(frozen=True)
 class BCConfig:
+    """A behavioural-cloning run (saved with its checkpoint)."""
+
     env: str = "narrow2d"
     #: ``sphere3d`` or ``sshape`` in the 3D scenes; ``None`` takes the scenario's default
     robot: str | None = None
     observation: str = "surface-normals"
     n_points: int = 64
-    n_problems: int = 2000
-    epochs: int = 30
+    #: demonstration problems planned by Bi-RRT
+    n_problems: int = field(default=2000, metadata={"min": 1})
+    #: passes over the demonstrations
+    epochs: int = field(default=30, metadata={"min": 1})
+    #: Adam step size
     lr: float = 1e-3
-    batch_size: int = 256
+    #: demonstration steps per gradient step
+    batch_size: int = field(default=256, metadata={"min": 1})
     seed: int = 0
     device: str = "cpu"
     #: draw new observation subsets every this many epochs (0: never)
     refresh_every: int = 5
     net: NetConfig = field(default_factory=lambda: NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True))
-    #: workers planning the demonstrations (Ray when installed, else processes)
-    workers: int = 1
+    #: workers planning the demonstrations (Ray when installed, else processes); the demonstrations equal a serial run's
+    workers: int = field(default=1, metadata={"min": 1})
     #: a Ray cluster to plan the demonstrations on
     address: str | None = None
     #: a file of demonstrations: loaded if it exists, written after planning otherwise

@@ -51,15 +51,15 @@ class DaggerConfig:
     #: rounds of roll out, label, refit
     rounds: int = 20
     #: fresh training problems the policy attempts per round
-    rollouts: int = 400
+    rollouts: int = field(default=400, metadata={"min": 1})
     #: visited states of each failed rollout that the expert labels (evenly spaced)
     labels_per_failure: int = 4
     #: passes over all demonstrations after each round
     epochs_per_round: float = 2.0
     #: validation problems (``val`` split) after each round
-    eval_episodes: int = 200
+    eval_episodes: int = field(default=200, metadata={"min": 1})
     #: Bi-RRT node budget of the expert
-    max_nodes: int = 20000
+    max_nodes: int = field(default=20000, metadata={"min": 1})
 
 
 def _rollout_index(seed: int, rnd: int, rollouts: int, i: int) -> int:
