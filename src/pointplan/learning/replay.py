@@ -36,6 +36,34 @@ class Batch:
 _FIELDS = ("obs", "next_obs", "q", "q_next", "goal", "action", "action_norm", "collided")
 
 
+class EpisodeStaging:
+    """The running episodes of ``E`` environments: one transition per environment at a
+    time; each episode is handed out whole when it ends."""
+
+    def __init__(self, num_envs: int, horizon: int, obs_shape: tuple[int, ...], config_dim: int, action_dim: int, obs_dtype: type = np.float32) -> None:
+        e, h = int(num_envs), int(horizon)
+        self.arrays: dict[str, np.ndarray] = {
+            "obs": np.zeros((e, h) + tuple(obs_shape), obs_dtype),
+            "next_obs": np.zeros((e, h) + tuple(obs_shape), obs_dtype),
+            "q": np.zeros((e, h, config_dim)),
+            "q_next": np.zeros((e, h, config_dim)),
+            "goal": np.zeros((e, h, config_dim)),
+            "action": np.zeros((e, h, action_dim), np.float32),
+            "action_norm": np.zeros((e, h)),
+            "collided": np.zeros((e, h), bool),
+        }
+
+    def add(self, t: np.ndarray, done: np.ndarray, **transition: np.ndarray) -> list[tuple[np.ndarray, ...]]:
+        """One transition per environment, at step ``t[i]`` of its episode (the fields of
+        :meth:`EpisodeReplay.add_episode` as keywords); returns the episodes that are
+        ``done`` (views of the staging arrays, valid until the next call), in environment
+        order, as :meth:`EpisodeReplay.add_episode`'s arguments."""
+        rows = np.arange(len(t))
+        for k in _FIELDS:
+            self.arrays[k][rows, t] = transition[k]
+        return [tuple(self.arrays[k][i, : int(t[i]) + 1] for k in _FIELDS) for i in np.flatnonzero(done)]
+
+
 class EpisodeReplay:
     """A ring buffer of ``capacity`` transitions.
 
@@ -60,25 +88,20 @@ class EpisodeReplay:
         self.pos = 0
         self.size = 0
         self.n_episodes = 0
-        self._staged: dict[str, np.ndarray] = {}
+        self._staging: EpisodeStaging | None = None
 
     def track(self, num_envs: int, horizon: int) -> None:
         """Stage the running episodes of ``num_envs`` environments of at most ``horizon`` steps."""
-        e, h = int(num_envs), int(horizon)
-        self._staged = {k: np.zeros((e, h) + getattr(self, k).shape[1:], getattr(self, k).dtype) for k in _FIELDS}
+        self._staging = EpisodeStaging(num_envs, horizon, self.obs.shape[1:], self.q.shape[1], self.action.shape[1], self.obs.dtype.type)
 
     def add_steps(self, t: np.ndarray, done: np.ndarray, **transition: np.ndarray) -> None:
         """One transition per tracked environment, at step ``t[i]`` of its episode (the
         fields of :meth:`add_episode` as keywords); the episodes that are ``done`` enter
         the buffer, in environment order."""
-        if not self._staged:
+        if self._staging is None:
             raise RuntimeError("call track(num_envs, horizon) first")
-        rows = np.arange(len(t))
-        for k in _FIELDS:
-            self._staged[k][rows, t] = transition[k]
-        for i in np.flatnonzero(done):
-            n = int(t[i]) + 1
-            self.add_episode(*(self._staged[k][i, :n] for k in _FIELDS))
+        for episode in self._staging.add(t, done, **transition):
+            self.add_episode(*episode)
 
     def __len__(self) -> int:
         return self.size
