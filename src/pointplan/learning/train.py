@@ -229,6 +229,8 @@ def _start(cfg: TrainConfig, run_dir: Path, resume: str | Path | None, remote: A
         agent.actor.load_state_dict(load_checkpoint(cfg.init_actor, cfg.device)["actor"])
     if resume is not None:
         _resume(run, resume)
+        if run.steps >= cfg.total_steps:
+            raise ValueError(f"{resume}: the run has done {run.steps} steps already; set total_steps above that to continue it")
     robot = scenario.robot
     run.buffer = EpisodeReplay(int(min(cfg.sac.buffer_size, max(cfg.total_steps, 10_000))), obs_shape, robot.config_dim, robot.twist_dim)
     run.buffer.track(cfg.num_envs, core.horizon)
