@@ -28,7 +28,8 @@ import numpy as np
 
 
 def load() -> str:
-    return "load average %.2f %.2f %.2f on %d cores" % (*os.getloadavg(), os.cpu_count() or 0)
+    one, five, fifteen = os.getloadavg()
+    return f"load average {one:.2f} {five:.2f} {fifteen:.2f} on {os.cpu_count() or 0} cores"
 
 
 def bench_eval(env: str, robot_name: str | None, episodes: int, workers: int, seed: int, max_nodes: int) -> dict[str, float]:
@@ -50,7 +51,13 @@ def bench_eval(env: str, robot_name: str | None, episodes: int, workers: int, se
     times = []
     for _ in range(2):  # cold (the workers import pointplan on their first task), then warm
         t0 = time.perf_counter()
-        parallel = evaluate(make_planner("birrt", robot, seed=seed, max_nodes=max_nodes), ScenarioProblems.of(scenario, "test", episodes, seed), robot, progress=False, workers=workers)
+        parallel = evaluate(
+            make_planner("birrt", robot, seed=seed, max_nodes=max_nodes),
+            ScenarioProblems.of(scenario, "test", episodes, seed),
+            robot,
+            progress=False,
+            workers=workers,
+        )
         times.append(time.perf_counter() - t0)
 
     untimed = lambda m: {k: v for k, v in m.items() if not k.startswith("time")}  # noqa: E731
@@ -60,10 +67,16 @@ def bench_eval(env: str, robot_name: str | None, episodes: int, workers: int, se
     )
     cold, warm = times
     busy = sum(r.time_s for r in parallel.records)
-    print(f"eval: {episodes} {scenario.name} problems ({robot.name}), Bi-RRT: serial {t_serial:.1f} s; {workers} workers: {cold:.1f} s cold, {warm:.1f} s warm, Ray start-up {t_start:.1f} s")
-    print(f"      speed-up {t_serial / warm:.2f}x warm, {t_serial / cold:.2f}x cold, {t_serial / (cold + t_start):.2f}x with Ray's start-up (a fresh command); identical metrics and paths: {same}")
+    print(
+        f"eval: {episodes} {scenario.name} problems ({robot.name}), Bi-RRT: serial {t_serial:.1f} s; {workers} workers: {cold:.1f} s cold, {warm:.1f} s warm, Ray start-up {t_start:.1f} s"
+    )
+    print(
+        f"      speed-up {t_serial / warm:.2f}x warm, {t_serial / cold:.2f}x cold, {t_serial / (cold + t_start):.2f}x with Ray's start-up (a fresh command); identical metrics and paths: {same}"
+    )
     # where the time goes: scheduling overhead (workers idle) or slower planning (CPU shared)
-    print(f"      warm run: workers planning {busy / warm:.2f} of {workers} on average; a problem took {busy / sum(r.time_s for r in serial.records):.2f}x its serial time")
+    print(
+        f"      warm run: workers planning {busy / warm:.2f} of {workers} on average; a problem took {busy / sum(r.time_s for r in serial.records):.2f}x its serial time"
+    )
     return {"serial_s": t_serial, "cold_s": cold, "warm_s": warm, "ray_start_s": t_start, "identical": float(same)}
 
 
@@ -73,7 +86,9 @@ def bench_train(env: str, steps: int, workers: int, updates_per_step: float = 0.
     from pointplan.models.encoders import EncoderConfig
 
     net = NetConfig(EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True)
-    cfg = TrainConfig(env=env, total_steps=steps, num_envs=8, eval_every=max(steps // 6, 500), eval_episodes=100, updates_per_step=updates_per_step, warmup_steps=500, net=net)
+    cfg = TrainConfig(
+        env=env, total_steps=steps, num_envs=8, eval_every=max(steps // 6, 500), eval_episodes=100, updates_per_step=updates_per_step, warmup_steps=500, net=net
+    )
     runs = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, w in (("serial", None), (f"{workers} workers", workers)):
@@ -81,7 +96,9 @@ def bench_train(env: str, steps: int, workers: int, updates_per_step: float = 0.
             res = train(cfg, os.path.join(tmp, name.replace(" ", "_")), progress=False, workers=w)
             total = time.perf_counter() - t0
             runs[name] = res
-            print(f"train {env} ({updates_per_step} updates per step), {name}: {res.steps} env steps in {res.wall_time_s:.1f} s = {res.steps / res.wall_time_s:.0f} steps/s ({total:.1f} s with start-up), {res.history[-1]['updates']:.0f} updates")
+            print(
+                f"train {env} ({updates_per_step} updates per step), {name}: {res.steps} env steps in {res.wall_time_s:.1f} s = {res.steps / res.wall_time_s:.0f} steps/s ({total:.1f} s with start-up), {res.history[-1]['updates']:.0f} updates"
+            )
     print("      validation success by env steps:")
     for name, res in runs.items():
         print(f"      {name:>10}: " + "  ".join(f"{int(r['env_steps'])}:{r['val_success']:.2f}" for r in res.history))

@@ -51,7 +51,16 @@ def filled_buffer(rng: np.random.Generator, episodes: int = 40) -> EpisodeReplay
             col.append(info["collided"])
         obs_a = np.stack(obs, 1)
         for i in range(8):
-            buf.add_episode(obs_a[i], obs_a[i], np.stack(q, 1)[i], np.stack(qn, 1)[i], np.broadcast_to(core.goal[i], (50, 2)), np.stack(a, 1)[i], np.linalg.norm(np.stack(a, 1)[i], axis=1), np.stack(col, 1)[i])
+            buf.add_episode(
+                obs_a[i],
+                obs_a[i],
+                np.stack(q, 1)[i],
+                np.stack(qn, 1)[i],
+                np.broadcast_to(core.goal[i], (50, 2)),
+                np.stack(a, 1)[i],
+                np.linalg.norm(np.stack(a, 1)[i], axis=1),
+                np.stack(col, 1)[i],
+            )
     return buf
 
 

@@ -19,8 +19,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from pointplan.geometry._se3_kernels import HAVE_NUMBA
-from pointplan.robots import SShape, sshape
+from pointplan.robots import SShape
+from pointplan.robots.sshape import NumpySShape
 
 
 def calls_per_second(fn: Callable[[], object], budget: float) -> float:
@@ -42,27 +42,21 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="0.1 s per measurement instead of 0.5 s")
     parser.add_argument("--birrt", action="store_true", help="also time Bi-RRT (3,000 nodes) on Slot test problems 1-3 with each path")
     args = parser.parse_args()
-    if not HAVE_NUMBA:
-        raise SystemExit("numba is not installed: there is no compiled path to compare")
     budget = 0.1 if args.quick else 0.5
-    robot = SShape()
+    robot, reference = SShape(), NumpySShape()
     rng = np.random.default_rng(0)
     print(f"{'op':<10}{'N':>5}{'compiled /s':>14}{'numpy /s':>12}{'ratio':>8}")
     for n in (1, 16, 256):
         nodes = np.concatenate([rng.uniform(-1, 1, (n, 3)), robot.sample_orientation(rng, n)], -1)
         q = nodes[0]
         v = rng.normal(size=(n, 6)) * robot.action_scale
-        cases: dict[str, Callable[[], object]] = {
-            "integrate": lambda q=q, v=v: robot.integrate(q[None], v),
-            "log": lambda q=q, nodes=nodes: robot.log(nodes, q[None]),
+        cases: dict[str, Callable[[SShape], object]] = {
+            "integrate": lambda r, q=q, v=v: r.integrate(q[None], v),
+            "log": lambda r, q=q, nodes=nodes: r.log(nodes, q[None]),
         }
         for op, fn in cases.items():
-            compiled = calls_per_second(fn, budget)
-            sshape.HAVE_NUMBA = False
-            try:
-                plain = calls_per_second(fn, budget)
-            finally:
-                sshape.HAVE_NUMBA = True
+            compiled = calls_per_second(lambda fn=fn: fn(robot), budget)
+            plain = calls_per_second(lambda fn=fn: fn(reference), budget)
             print(f"{op:<10}{n:>5}{compiled:>14,.0f}{plain:>12,.0f}{compiled / plain:>7.1f}x")
     if args.birrt:
         birrt_speed()
@@ -79,13 +73,14 @@ def birrt_speed() -> None:
         problem = scenario.problem("test", i)
         runs = {}
         for compiled in (False, True):
-            sshape.HAVE_NUMBA = compiled
+            robot = SShape() if compiled else NumpySShape()
             t = time.perf_counter()
-            res = BiRRT(scenario.robot, max_nodes=3000, seed=1).plan(problem)
+            res = BiRRT(robot, max_nodes=3000, seed=1).plan(problem)
             runs[compiled] = (time.perf_counter() - t, res)
-        sshape.HAVE_NUMBA = True
         (t_np, a), (t_c, b) = runs[False], runs[True]
-        same = (a.success, a.nodes, a.collision_checks, len(a.path)) == (b.success, b.nodes, b.collision_checks, len(b.path)) and np.allclose(a.path, b.path, atol=1e-9)
+        same = (a.success, a.nodes, a.collision_checks, len(a.path)) == (b.success, b.nodes, b.collision_checks, len(b.path)) and np.allclose(
+            a.path, b.path, atol=1e-9
+        )
         print(f"{i:<18}{t_np:>9.2f}{t_c:>12.2f}{t_np / t_c:>7.2f}x{b.nodes:>7}  {same}")
 
 

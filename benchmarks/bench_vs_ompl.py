@@ -74,7 +74,18 @@ class OMPLReference:
         boxes = []
         for b in scene.obstacles:
             rot = np.asarray(b.rotation)
-            boxes.append((float(b.center[0]), float(b.center[1]), float(rot[0, 0]), float(rot[1, 0]), float(rot[0, 1]), float(rot[1, 1]), float(b.size[0]) / 2, float(b.size[1]) / 2))
+            boxes.append(
+                (
+                    float(b.center[0]),
+                    float(b.center[1]),
+                    float(rot[0, 0]),
+                    float(rot[1, 0]),
+                    float(rot[0, 1]),
+                    float(rot[1, 1]),
+                    float(b.size[0]) / 2,
+                    float(b.size[1]) / 2,
+                )
+            )
         checks = [0]
 
         def valid(s: Any) -> bool:
@@ -278,8 +289,19 @@ def main() -> None:
             "plus the one batched q_free call per run; rest = set-up, the goal connection, bookkeeping. "
             "policy-before: observation = BatchedCore.observe, motion check = BatchedCore.step with its q_free)"
         )
-        print(f"policy scene preparation (the observer's point set of a new workspace, like the collision world untimed above): median {1e6 * float(np.median(scene_prep)):.0f} us")
-    for a, b in (("policy", "ompl"), ("policy", "ompl-ref"), ("policy", "birrt"), ("policy", "policy-before"), ("policy-before", "ompl-ref"), ("ompl", "ompl-ref"), ("ompl", "birrt"), ("hybrid", "birrt")):
+        print(
+            f"policy scene preparation (the observer's point set of a new workspace, like the collision world untimed above): median {1e6 * float(np.median(scene_prep)):.0f} us"
+        )
+    for a, b in (
+        ("policy", "ompl"),
+        ("policy", "ompl-ref"),
+        ("policy", "birrt"),
+        ("policy", "policy-before"),
+        ("policy-before", "ompl-ref"),
+        ("ompl", "ompl-ref"),
+        ("ompl", "birrt"),
+        ("hybrid", "birrt"),
+    ):
         if a in med and b in med:
             print(f"median time {a} / {b}: wall {med[a] / med[b]:.2f}, cpu {cmed[a] / cmed[b]:.2f}")
 

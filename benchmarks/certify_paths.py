@@ -78,7 +78,12 @@ def obstacle(shape: Shape, dim: int) -> Obstacle:
     if isinstance(shape, Box):
         size = np.asarray(shape.size, np.float64)
         if dim == 2:
-            return Obstacle(coal.Box(size[0], size[1], _TALL), _tf(_lift(shape.rotation), [*shape.center, 0.0]), np.array([*shape.center, 0.0]), float(np.linalg.norm(size) / 2))
+            return Obstacle(
+                coal.Box(size[0], size[1], _TALL),
+                _tf(_lift(shape.rotation), [*shape.center, 0.0]),
+                np.array([*shape.center, 0.0]),
+                float(np.linalg.norm(size) / 2),
+            )
         return Obstacle(coal.Box(*size), _tf(shape.rotation, shape.center), np.asarray(shape.center, np.float64), float(np.linalg.norm(size) / 2))
     if isinstance(shape, Sphere):
         c = np.array([*shape.center, 0.0]) if dim == 2 else np.asarray(shape.center, np.float64)
@@ -89,7 +94,12 @@ def obstacle(shape: Shape, dim: int) -> Obstacle:
         return Obstacle(coal.Capsule(float(shape.radius), length), _tf(_axis_frame(b - a), (a + b) / 2), (a + b) / 2, length / 2 + float(shape.radius))
     if isinstance(shape, (Cylinder, Cone)):
         kind = coal.Cylinder if isinstance(shape, Cylinder) else coal.Cone
-        return Obstacle(kind(float(shape.radius), float(shape.length)), _tf(shape.rotation, shape.center), np.asarray(shape.center, np.float64), float(math.hypot(shape.radius, shape.length / 2)))
+        return Obstacle(
+            kind(float(shape.radius), float(shape.length)),
+            _tf(shape.rotation, shape.center),
+            np.asarray(shape.center, np.float64),
+            float(math.hypot(shape.radius, shape.length / 2)),
+        )
     if isinstance(shape, Mesh):
         model = coal.BVHModelOBBRSS()
         model.beginModel(len(shape.faces), len(shape.vertices))

@@ -44,7 +44,9 @@ def run(args: argparse.Namespace) -> None:
             "collision_checks": int(res.collision_checks),
             "path_length": path_length(sc.robot, res.path) if ok else None,
             "time_s": elapsed,
-            "extra": {k: float(v) if isinstance(v, (int, float, np.floating)) else str(v) for k, v in problem.scene.__dict__.get("slot", {}).items() if k == "width"},
+            "extra": {
+                k: float(v) if isinstance(v, (int, float, np.floating)) else str(v) for k, v in problem.scene.__dict__.get("slot", {}).items() if k == "width"
+            },
         }
         with out.open("a") as f:
             f.write(json.dumps(row) + "\n")

@@ -24,7 +24,7 @@ import torch
 
 from pointplan.envs.core import EnvConfig
 from pointplan.evaluation.evaluate import check_path
-from pointplan.learning.checkpoint import load_checkpoint
+from pointplan.models.checkpoint import load_checkpoint
 from pointplan.models.policy import Policy, shipped_checkpoint
 from pointplan.planners.policy import rollout_batch
 from pointplan.scenes.scenarios import make_scenario
@@ -36,7 +36,9 @@ def average_policy(paths: list[str]) -> Policy:
     states = [load_checkpoint(p, "cpu")["actor"] for p in paths]
     if any(set(s) != set(states[0]) or any(s[k].shape != states[0][k].shape for k in s) for s in states):
         sys.exit("--average needs checkpoints of one network layout")
-    mean = {k: (sum(s[k].double() for s in states) / len(states)).to(states[0][k].dtype) if states[0][k].is_floating_point() else states[0][k] for k in states[0]}
+    mean = {
+        k: (sum(s[k].double() for s in states) / len(states)).to(states[0][k].dtype) if states[0][k].is_floating_point() else states[0][k] for k in states[0]
+    }
     avg = copy.deepcopy(base)
     avg.actor.load_state_dict(mean)
     return avg

@@ -1,6 +1,6 @@
 """Markdown table of the 3D Bi-RRT evaluations written by `pointplan eval --json`.
 
-    python scripts/table_birrt3d.py docs/data/birrt3d/*.json
+python scripts/table_birrt3d.py docs/data/birrt3d/*.json
 """
 
 from __future__ import annotations

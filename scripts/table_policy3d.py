@@ -53,7 +53,9 @@ def run(args: argparse.Namespace) -> None:
             report = evaluate(planner, problems, scenario.robot, progress=not args.quiet)
             m = report.metrics()
             cell_path(args.robot, scene, planner_name).parent.mkdir(parents=True, exist_ok=True)
-            cell_path(args.robot, scene, planner_name).write_text(json.dumps({**m, "env": scene, "robot": args.robot, "planner": planner_name, "seed": 0}, indent=2) + "\n")
+            cell_path(args.robot, scene, planner_name).write_text(
+                json.dumps({**m, "env": scene, "robot": args.robot, "planner": planner_name, "seed": 0}, indent=2) + "\n"
+            )
             print(f"{scene} {planner_name}: {100 * m['success_rate']:.1f}%", flush=True)
 
 

@@ -18,12 +18,12 @@ import torch
 import pointplan
 from pointplan.cli import main
 from pointplan.envs.core import EnvConfig
-from pointplan.learning.checkpoint import FORMAT, VERSION, CheckpointError, find_non_plain, load_checkpoint, save_checkpoint, to_dict
-from pointplan.learning.convert import convert_checkpoint
 from pointplan.learning.replay import EpisodeReplay
 from pointplan.learning.sac import SAC, SACConfig
 from pointplan.learning.train import TrainConfig, train
 from pointplan.models.actor_critic import NetConfig
+from pointplan.models.checkpoint import FORMAT, VERSION, CheckpointError, find_non_plain, load_checkpoint, save_checkpoint, to_dict
+from pointplan.models.convert import convert_checkpoint
 from pointplan.models.encoders import EncoderConfig
 from pointplan.models.policy import Policy, shipped_checkpoint
 from pointplan.robots import Disc2D
@@ -171,7 +171,9 @@ def test_save_refuses_cycles_and_header_keys(tmp_path: Path) -> None:
 
 # ------------------------------------------------------------------ (3) exact round trip of the trainer state
 def test_trainer_checkpoint_round_trip_is_bit_exact(tmp_path: Path) -> None:
-    cfg = TrainConfig(env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, eval_every=200, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32, policy_avg=0.01))
+    cfg = TrainConfig(
+        env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, eval_every=200, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32, policy_avg=0.01)
+    )
     train(cfg, tmp_path / "a", progress=False)
     state = load_checkpoint(tmp_path / "a" / "last.pt")
     assert find_non_plain(state) is None and state["version"] == VERSION
@@ -228,7 +230,13 @@ def test_resumed_updates_match_uninterrupted_ones(tmp_path: Path) -> None:
 
 # ------------------------------------------------------------------ (4) converting older files
 def test_version_1_data_only_file_loads_and_converts(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    payload = {"package_version": "0.0.9", "robot": "disc2d", "obs_shape": [64, 4], "actor": OrderedDict(w=torch.arange(4.0)), "trainer": {"rng": {"state": {"state": 2**100}}}}
+    payload = {
+        "package_version": "0.0.9",
+        "robot": "disc2d",
+        "obs_shape": [64, 4],
+        "actor": OrderedDict(w=torch.arange(4.0)),
+        "trainer": {"rng": {"state": {"state": 2**100}}},
+    }
     torch.save({"format": FORMAT, "version": 1, **payload}, tmp_path / "v1.pt")
     assert load_checkpoint(tmp_path / "v1.pt")["version"] == 1  # pure data: accepted as it is
     assert main(["convert-checkpoint", str(tmp_path / "v1.pt"), str(tmp_path / "v2.pt")]) == 0
@@ -239,7 +247,18 @@ def test_version_1_data_only_file_loads_and_converts(tmp_path: Path, capsys: pyt
 
 def test_old_file_with_objects_is_refused_then_converted(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     old = tmp_path / "old.pt"
-    torch.save({"format": FORMAT, "version": 1, "net": SMALL, "obs_shape": np.array([64, 4]), "val_success": np.float64(0.75), "init": Path("runs/bc.pt"), "actor": {"w": torch.nn.Parameter(torch.ones(2))}}, old)
+    torch.save(
+        {
+            "format": FORMAT,
+            "version": 1,
+            "net": SMALL,
+            "obs_shape": np.array([64, 4]),
+            "val_success": np.float64(0.75),
+            "init": Path("runs/bc.pt"),
+            "actor": {"w": torch.nn.Parameter(torch.ones(2))},
+        },
+        old,
+    )
     with _one_line_error(re.escape(f"pointplan convert-checkpoint {old} NEW.pt")) as info:
         load_checkpoint(old)
     assert "\n" not in str(info.value)
@@ -279,5 +298,5 @@ def test_only_the_conversion_unpickles() -> None:
         found = [line.strip() for line in py.read_text().splitlines() if risky.search(line)]
         if found:
             hits[py.relative_to(SRC).as_posix()] = found
-    assert list(hits) == ["pointplan/learning/convert.py"], hits
-    assert all("weights_only=False" in line for line in hits["pointplan/learning/convert.py"])
+    assert list(hits) == ["pointplan/models/convert.py"], hits
+    assert all("weights_only=False" in line for line in hits["pointplan/models/convert.py"])

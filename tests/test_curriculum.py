@@ -93,6 +93,7 @@ def test_episode_source_without_retries_leaves_the_rng_alone() -> None:
         EpisodeSource(b, None, retry=0.5)
 
 
+@pytest.mark.slow
 def test_training_with_retries_logs_the_pool(tmp_path: Path) -> None:
     small = NetConfig(EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True)
     cfg = TrainConfig(num_envs=8, total_steps=1_600, warmup_steps=400, eval_every=800, eval_episodes=10, retry_failures=0.5, mine_episodes=20, net=small)

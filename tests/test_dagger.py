@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from pointplan.config import from_dict
 from pointplan.learning.bc import BCConfig, generate_demos, load_demos, save_demos
-from pointplan.learning.checkpoint import load_checkpoint
-from pointplan.learning.dagger import DaggerConfig, config_from_dict, train_dagger
+from pointplan.learning.dagger import DaggerConfig, train_dagger
 from pointplan.models.actor_critic import NetConfig
+from pointplan.models.checkpoint import load_checkpoint
 from pointplan.models.encoders import EncoderConfig
 from pointplan.models.policy import Policy
 from pointplan.scenes.scenarios import Narrow2DScenario, make_scenario
+
+pytestmark = pytest.mark.slow  # behavioural cloning and DAgger train networks
 
 SMALL = NetConfig(EncoderConfig(width=16, layers=2), head_width=16, head_layers=2, critic_action="pooled", shared_encoder=True)
 
@@ -59,7 +64,7 @@ def test_dagger_rounds_add_expert_labels_and_resume(tmp_path: Path) -> None:
     assert any(tuple(path[0]) not in starts for _, path in first.paths)
     state = load_checkpoint(tmp_path / "last.pt")
     assert state["dagger"]["round"] == 2
-    resumed = config_from_dict(state["dagger_config"], rounds=3)
+    resumed = replace(from_dict(DaggerConfig, state["dagger_config"]), rounds=3)
     train_dagger(resumed, tmp_path, progress=False, resume=tmp_path / "last.pt")
     rows = (tmp_path / "metrics.csv").read_text().splitlines()
     assert [r.split(",")[0] for r in rows[1:]] == ["1", "2", "3"]

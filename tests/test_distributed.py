@@ -17,6 +17,8 @@ from pointplan.evaluation import evaluate
 from pointplan.planners import BiRRT
 from pointplan.scenes.scenarios import make_scenario
 
+pytestmark = pytest.mark.slow  # Ray starts worker processes
+
 ray = pytest.importorskip("ray")
 
 N = 10

@@ -172,3 +172,36 @@ def test_vector_env_autoresets() -> None:
     assert trunc.all()
     assert "final_obs" in info and info["_final"].all()
     assert np.all(venv.unwrapped.core.t == 0)
+
+
+def test_envs_draw_from_np_random_after_seeding():
+    """Gymnasium's convention: ``reset(seed=...)`` seeds ``self.np_random``, the one
+    generator the env draws from; the same seed gives the same episode."""
+    import gymnasium as gym
+
+    env = gym.make("pointplan/Narrow2D-v0").unwrapped
+    a, _ = env.reset(seed=7)
+    state = env.np_random.bit_generator.state
+    b, _ = env.reset(seed=7)
+    assert env.np_random_seed == 7
+    np.testing.assert_array_equal(a["desired_goal"], b["desired_goal"])
+    env.np_random.bit_generator.state = state
+    c, _ = env.reset()  # no seed: continues from np_random
+    assert not np.array_equal(c["desired_goal"], a["desired_goal"])
+    venv = PlanningVectorEnv("narrow2d", num_envs=3)
+    x, _ = venv.reset(seed=4)
+    y, _ = venv.reset(seed=4)
+    np.testing.assert_array_equal(x["desired_goal"], y["desired_goal"])
+    assert venv.np_random_seed == 4
+
+
+@pytest.mark.parametrize("name", ["narrow2d", "empty2d", "boxes3d", "slot"])
+def test_scenario_bounds_need_no_scene(name, monkeypatch):
+    from pointplan.scenes.scenarios import make_scenario
+
+    scenario = make_scenario(name)
+    want = scenario.scene("test", 0)
+    monkeypatch.setattr(type(scenario), "scene", lambda *a, **k: pytest.fail("built a scene"))
+    low, high = scenario.bounds
+    np.testing.assert_array_equal(low, want.low)
+    np.testing.assert_array_equal(high, want.high)

@@ -27,6 +27,7 @@ METRIC_KEYS = {
     "time_mean_s",
     "time_median_s",
     "planner_claims_disagree",
+    "invalid_problems",
 }
 
 

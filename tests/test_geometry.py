@@ -411,10 +411,7 @@ def sshape_coal_parts(robot: SShape, q: np.ndarray) -> list[tuple[object, coal.T
     """The five bars as coal boxes, posed from the configuration independently of
     ``world_parts``."""
     r = lie.quat_to_matrix(q[3:])
-    return [
-        (coal.Box(*(2 * h)), tf(r @ br, r @ c + q[:3]))
-        for c, br, h in zip(robot.parts.box_centers, robot.parts.box_rotations, robot.parts.box_halfs)
-    ]
+    return [(coal.Box(*(2 * h)), tf(r @ br, r @ c + q[:3])) for c, br, h in zip(robot.parts.box_centers, robot.parts.box_rotations, robot.parts.box_halfs)]
 
 
 @pytest.mark.parametrize("kind", ["box", "sphere", "capsule", "cylinder", "cone"])

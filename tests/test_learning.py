@@ -11,11 +11,11 @@ import torch
 from pointplan.envs import PlanningEnv
 from pointplan.envs.core import EnvConfig
 from pointplan.learning.bc import BCConfig, generate_demos, resample_path, train_bc
-from pointplan.learning.checkpoint import CheckpointError
 from pointplan.learning.replay import EpisodeReplay
 from pointplan.learning.sac import batch_rewards
 from pointplan.learning.train import TrainConfig, train
 from pointplan.models.actor_critic import NetConfig, build_networks
+from pointplan.models.checkpoint import CheckpointError
 from pointplan.models.encoders import EncoderConfig, PointNetEncoder
 from pointplan.models.policy import Policy
 from pointplan.planners.policy import PolicyPlanner
@@ -62,7 +62,16 @@ def _collect(env: PlanningEnv, buffer: EpisodeReplay, episodes: int, rng: np.ran
             q = env.core.q[0].copy()
             a = rng.uniform(-1, 1, 2).astype(np.float32)
             nobs, _, term, trunc, info = env.step(a)
-            for k, v in (("obs", obs["observation"]), ("next_obs", nobs["observation"]), ("q", q), ("q_next", env.core.q[0].copy()), ("goal", env.core.goal[0].copy()), ("action", a), ("action_norm", info["action_norm"]), ("collided", info["collided"])):
+            for k, v in (
+                ("obs", obs["observation"]),
+                ("next_obs", nobs["observation"]),
+                ("q", q),
+                ("q_next", env.core.q[0].copy()),
+                ("goal", env.core.goal[0].copy()),
+                ("action", a),
+                ("action_norm", info["action_norm"]),
+                ("collided", info["collided"]),
+            ):
                 recs[k].append(v)
             obs, done = nobs, term or trunc
         buffer.add_episode(*(np.asarray(recs[k]) for k in recs))
@@ -80,7 +89,7 @@ def test_relabelled_reward_equals_env_reward() -> None:
     assert b.relabelled.mean() > 0.9
     reward, success = batch_rewards(robot, EnvConfig(), b)
     assert success.any()  # some relabelled goals are reached by their own transition
-    episode_of = buf.episode[:len(buf)]
+    episode_of = buf.episode[: len(buf)]
     idx = [int(np.flatnonzero((buf.q[: len(buf)] == b.q[i]).all(1) & (buf.action[: len(buf)] == b.action[i]).all(1))[0]) for i in range(len(b.q))]
     for i in range(len(b.q)):
         # replay the stored transition in a fresh env aiming at the relabelled goal
@@ -91,9 +100,20 @@ def test_relabelled_reward_equals_env_reward() -> None:
         assert term == success[i]
 
 
+@pytest.mark.slow
 def test_sac_her_learns_empty_2d(tmp_path: Path) -> None:
     """SAC + HER reaches 90% on the obstacle-free square within a small budget."""
-    cfg = TrainConfig(env="empty2d", num_envs=8, total_steps=12_000, warmup_steps=500, updates_per_step=0.5, eval_every=1_000, eval_episodes=100, target_success=0.95, net=SMALL)
+    cfg = TrainConfig(
+        env="empty2d",
+        num_envs=8,
+        total_steps=12_000,
+        warmup_steps=500,
+        updates_per_step=0.5,
+        eval_every=1_000,
+        eval_episodes=100,
+        target_success=0.95,
+        net=SMALL,
+    )
     res = train(cfg, tmp_path, progress=False)
     assert res.best_success >= 0.9, res.history
     assert (tmp_path / "best.pt").exists() and (tmp_path / "last.pt").exists() and (tmp_path / "metrics.csv").exists()
@@ -162,8 +182,8 @@ def test_actor_delay_keeps_the_actor_still() -> None:
 def test_policy_average_is_an_exponential_average_of_the_actor(tmp_path: Path) -> None:
     """With ``policy_avg`` the averaged actor moves by ``rate`` towards the actor after every
     update, is what the run saves as its policy, and survives a resume."""
-    from pointplan.learning.checkpoint import load_checkpoint
     from pointplan.learning.sac import SAC, SACConfig
+    from pointplan.models.checkpoint import load_checkpoint
 
     rng = np.random.default_rng(0)
     env = PlanningEnv("narrow2d")
@@ -183,7 +203,9 @@ def test_policy_average_is_an_exponential_average_of_the_actor(tmp_path: Path) -
     plain = SAC(env.robot, EnvConfig(), (64, 4), SMALL, SACConfig(batch_size=32))
     assert plain.actor_avg is None and plain.policy_actor is plain.actor
 
-    cfg = TrainConfig(env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, eval_every=400, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32, policy_avg=0.01))
+    cfg = TrainConfig(
+        env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, eval_every=400, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32, policy_avg=0.01)
+    )
     train(cfg, tmp_path / "a", progress=False)
     state = load_checkpoint(tmp_path / "a" / "last.pt")
     saved, avg = state["actor"], state["trainer"]["agent"]["actor_avg"]
@@ -197,10 +219,20 @@ def test_policy_average_is_an_exponential_average_of_the_actor(tmp_path: Path) -
 def test_training_resumes_from_last_checkpoint(tmp_path: Path) -> None:
     from dataclasses import replace
 
-    from pointplan.learning.checkpoint import load_checkpoint
     from pointplan.learning.sac import SACConfig
+    from pointplan.models.checkpoint import load_checkpoint
 
-    cfg = TrainConfig(env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, updates_per_step=0.25, eval_every=200, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32))
+    cfg = TrainConfig(
+        env="empty2d",
+        num_envs=4,
+        total_steps=400,
+        warmup_steps=100,
+        updates_per_step=0.25,
+        eval_every=200,
+        eval_episodes=5,
+        net=SMALL,
+        sac=SACConfig(batch_size=32),
+    )
     first = train(cfg, tmp_path / "a", progress=False)
     state = load_checkpoint(tmp_path / "a" / "last.pt")
     assert state["trainer"]["steps"] == first.steps == 400

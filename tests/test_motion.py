@@ -158,6 +158,7 @@ def test_sshape_growth_covers_rotation() -> None:
         assert np.all(np.abs(local) <= halfs[:, None, :] + 1e-12)
 
 
+@pytest.mark.slow  # certification of planned paths
 @pytest.mark.parametrize("name", ["disc2d", "sshape"])
 def test_birrt_paths_pass_the_evaluator(name: str) -> None:
     sc = make_scenario("narrow2d" if name == "disc2d" else "qureshi3d", robot=None if name == "disc2d" else name)

@@ -97,7 +97,9 @@ def test_flat_ply_is_a_2d_cloud(tmp_path: Path) -> None:
 def test_pcd_with_and_without_normals(tmp_path: Path) -> None:
     pypcd4 = pytest.importorskip("pypcd4")
     p, n = box_cloud(2000)
-    pypcd4.PointCloud.from_points(np.c_[p, n].astype(np.float32), ("x", "y", "z", "normal_x", "normal_y", "normal_z"), (np.float32,) * 6).save(tmp_path / "with.pcd")
+    pypcd4.PointCloud.from_points(np.c_[p, n].astype(np.float32), ("x", "y", "z", "normal_x", "normal_y", "normal_z"), (np.float32,) * 6).save(
+        tmp_path / "with.pcd"
+    )
     pypcd4.PointCloud.from_xyz_points(p.astype(np.float32)).save(tmp_path / "bare.pcd")
     points, normals = read_point_file(tmp_path / "with.pcd")
     np.testing.assert_allclose(points, p, atol=1e-6)
@@ -208,7 +210,14 @@ def test_depth_png_in_a_scene_file(tmp_path: Path) -> None:
     Image.fromarray((depth * 1000).astype(np.uint16)).save(tmp_path / "depth.png")
     np.testing.assert_array_equal(read_depth_image(tmp_path / "depth.png"), depth * 1000)
     q = [0.0, 1.0, 0.0, 0.0]  # half a turn about x: the camera looks down the world's -z
-    ob = {"type": "points", "depth": "depth.png", "intrinsics": intr, "depth_scale": 0.001, "camera_pose": {"position": [0.0, 0.0, 2.0], "quaternion": q}, "stride": 2}
+    ob = {
+        "type": "points",
+        "depth": "depth.png",
+        "intrinsics": intr,
+        "depth_scale": 0.001,
+        "camera_pose": {"position": [0.0, 0.0, 2.0], "quaternion": q},
+        "stride": 2,
+    }
     doc = scene_doc(3, ob)
     doc["bounds"] = {"low": [-2, -2, 0], "high": [2, 2, 3]}
     cloud = load_scene(write(tmp_path, doc)).scene.obstacles[0]
@@ -275,7 +284,18 @@ def test_plan_on_a_bare_point_file(tmp_path: Path) -> None:
     scene = load_points_scene(tmp_path / "box.npy")
     assert scene.dim == 3 and np.all(scene.low < p.min(0)) and np.all(scene.high > p.max(0))
     out = tmp_path / "o.json"
-    args = ["plan", "--points", str(tmp_path / "box.npy"), "--bounds=-1,-1,-1,1,1,1", "--start=-0.8,-0.8,-0.8", "--goal", "0.8,0.6,0.8", "--json", str(out), "--quiet"]
+    args = [
+        "plan",
+        "--points",
+        str(tmp_path / "box.npy"),
+        "--bounds=-1,-1,-1,1,1,1",
+        "--start=-0.8,-0.8,-0.8",
+        "--goal",
+        "0.8,0.6,0.8",
+        "--json",
+        str(out),
+        "--quiet",
+    ]
     assert main(args) == 0
     assert json.loads(out.read_text())["metrics"]["success_rate"] == 1.0
     # drawn problems when none are given
@@ -291,4 +311,3 @@ def test_birrt_avoids_the_cloud() -> None:
     # every configuration of the path keeps clear of every point
     d = np.min(np.linalg.norm(res.path[:, None] - sf.scene.obstacles[0].points[None], axis=2))
     assert d > float(robot.parts.sphere_radii.max())
-

@@ -50,7 +50,7 @@ def test_observe_one_is_observe_of_one(problems: list[Problem]) -> None:
         q = problems[0].start
         for _ in range(3):
             assert np.array_equal(a.observe(q[None], ra)[0], b.observe_one(q, rb))
-        u = rb.random(b.draws_one())
+        rb.random(b.draws_one())
         ra.random(b.draws_one())  # keep the streams level
         assert np.array_equal(a.observe(q[None], np.random.default_rng(9))[0], b.observe_one(q, u=np.random.default_rng(9).random(b.draws_one())))
 

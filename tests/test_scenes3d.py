@@ -23,7 +23,8 @@ from pointplan.scenes.scenarios import make_scenario
 from pointplan.scenes.scene import DynamicScene
 from pointplan.scenes.scenes3d import SCENARIOS_3D, SlotConfig, SlotScenario
 
-SCENES = list(SCENARIOS_3D)
+#: 3D-YCB loads and decimates meshes: its cases are slow
+SCENES = [pytest.param(s, marks=pytest.mark.slow) if s == "ycb3d" else s for s in SCENARIOS_3D]
 STATIC = [s for s in SCENES if s != "dynamic3d"]
 
 
@@ -130,6 +131,7 @@ def test_qureshi_sizes_are_permuted_at_fixed_centres() -> None:
     assert sorted(map(tuple, (o.size for o in a))) == sorted(map(tuple, (o.size for o in b)))
     assert any(not np.array_equal(x.size, y.size) for x, y in zip(a, b))
     assert all(np.array_equal(o.rotation, np.eye(3)) for o in a)
+
     # only 10! layouts exist: the splits own disjoint sets of them
     def layout(scene):
         return tuple(tuple(o.size) for o in scene.obstacles)

@@ -13,6 +13,8 @@ from pointplan.geometry.collision import mesh_contains
 from pointplan.geometry.shapes import Mesh
 from pointplan.scenes import ycb
 
+pytestmark = pytest.mark.slow  # YCB meshes are loaded and repaired
+
 
 def _write(path: Path, mesh) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)

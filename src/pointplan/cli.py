@@ -18,6 +18,26 @@ class CLIError(Exception):
     """A user-facing error: printed without a traceback."""
 
 
+def _int_at_least(text: str, low: int, what: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < low:
+        raise argparse.ArgumentTypeError(f"must be {what}, got {value}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer of at least 1."""
+    return _int_at_least(text, 1, "at least 1")
+
+
+def non_negative_int(text: str) -> int:
+    """An argparse type: an integer of at least 0."""
+    return _int_at_least(text, 0, "0 or more")
+
+
 # ---------------------------------------------------------------------------- helpers
 def _numbers(text: str | None, what: str) -> np.ndarray | None:
     if text is None:
@@ -87,6 +107,28 @@ def _scenario(args: argparse.Namespace) -> Any:
         raise CLIError(str(e)) from None
 
 
+#: planners that take --checkpoint
+POLICY_PLANNERS = ("policy", "hybrid")
+
+
+def _check_checkpoint(args: argparse.Namespace, names: Sequence[str]) -> None:
+    """--checkpoint needs a planner that runs a policy."""
+    if getattr(args, "checkpoint", None) and not any(n in POLICY_PLANNERS for n in names):
+        raise CLIError(f"--checkpoint is for --planner policy or hybrid; {', '.join(names)} takes no checkpoint")
+
+
+def _policy_input(planner: Any) -> tuple[str, int] | None:
+    """The observation and point count the policy of ``planner`` sees (None without one)."""
+    from .planners.hybrid import HybridPlanner
+    from .planners.policy import PolicyPlanner
+
+    if isinstance(planner, HybridPlanner):
+        planner = planner.policy
+    if not isinstance(planner, PolicyPlanner) or planner.env.observation is None:
+        return None
+    return str(planner.env.observation), int(planner.env.n_points or 0) or 64
+
+
 def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
     from .planners import make_planner
 
@@ -118,33 +160,45 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument("--env", default="narrow2d", help="scenario: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d (default: narrow2d)")
     p.add_argument("--scene", help="plan on a scene file (JSON, see docs/scenes.md) instead of --env")
     p.add_argument("--robot", help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot), or the robot of a scene file that names none")
-    p.add_argument("--planner", default=planner_default, help="birrt, straight, policy, hybrid (the policy, then Bi-RRT where it fails) or ompl:NAME for an OMPL planner such as ompl:RRTConnect (pip install 'pointplan[ompl]') (default: %(default)s)")
-    p.add_argument("--checkpoint", help="trained policy for --planner policy (default: the policy that ships for the robot and --observation)")
-    p.add_argument("--observation", help="what the robot observes (the policy's input; drawn by render and view): 2D surface, surface-normals, interior or image; 3D global or local (policy default: the one that ships for the robot)")
-    p.add_argument("--max-nodes", type=int, default=20000, help="Bi-RRT node budget (default: %(default)s)")
+    p.add_argument(
+        "--planner",
+        default=planner_default,
+        help="birrt, straight, policy, hybrid (the policy, then Bi-RRT where it fails) or ompl:NAME for an OMPL planner such as ompl:RRTConnect (pip install 'pointplan[ompl]') (default: %(default)s)",
+    )
+    p.add_argument(
+        "--checkpoint",
+        help="trained policy (a best.pt or last.pt) for --planner policy or hybrid (default: the shipped policy for the robot and --observation); an error with other planners",
+    )
+    p.add_argument(
+        "--observation",
+        help="what the robot observes (the policy's input; drawn by render and view): 2D surface, surface-normals, interior or image; 3D global or local (policy default: the one that ships for the robot)",
+    )
+    p.add_argument("--max-nodes", type=positive_int, default=20000, help="Bi-RRT node budget (default: %(default)s)")
     p.add_argument("--time-limit", type=float, help="seconds per problem for ompl:NAME planners (default: 1)")
     p.add_argument("--range", type=float, help="longest edge of ompl:NAME planners that have one (default: 0.07, Bi-RRT's step)")
-    p.add_argument("--seed", type=int, default=0, help="problem-set seed (default: %(default)s)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="problem-set seed, 0 or more (default: %(default)s)")
 
 
 # ---------------------------------------------------------------------------- commands
 def cmd_eval(args: argparse.Namespace) -> int:
     from .evaluation import evaluate, format_table
 
+    names = [n.strip() for n in args.planner.split(",")]
+    _check_checkpoint(args, names)
     scenario = _scenario(args)
     problems = _test_problems(scenario, args, args.episodes)
     results: dict[str, dict[str, Any]] = {}
     interrupted = None
-    for name in args.planner.split(","):
-        planner = _planner(name.strip(), scenario.robot, args, args.seed)
+    for name in names:
+        planner = _planner(name, scenario.robot, args, args.seed)
         report = evaluate(planner, problems, scenario.robot, progress=not args.quiet, **_scale(args))
-        results[name.strip()] = report.metrics()
-        interrupted = getattr(report, "interrupted", None)
+        results[name] = report.metrics()
+        interrupted = report.interrupted
         if interrupted:
             break
     print(format_table(results))
     payload: dict[str, Any] = dict(next(iter(results.values()))) if len(results) == 1 else {"planners": results}
-    payload.update({"env": scenario.name, "seed": args.seed})
+    payload.update({"planner": names[0] if len(names) == 1 else names, "env": scenario.name, "seed": args.seed})
     if interrupted:
         payload["interrupted"] = {"finished": interrupted[0], "problems": interrupted[1]}
     _write_json(args.json, payload)
@@ -174,34 +228,30 @@ def _test_problems(scenario: Any, args: argparse.Namespace, n: int) -> Any:
     return scenario.problems("test", n, seed=args.seed)
 
 
-def _world_observation(problem: Any, robot: Any, observation: str, n_points: int | None, q: Any, t: int, seed: int) -> tuple[Any, Any]:
-    """What the robot at ``q`` (time ``t``) observes, back in the world frame (3D)."""
-    import numpy as np
-
-    from .observers import make_observer
-
-    observer = make_observer(observation, robot, **({"n_points": n_points} if n_points else {}))
-    observer.bind([problem.scene])
-    obs = observer.observe(np.asarray(q, np.float64)[None], np.random.default_rng(seed), np.array([t]))[0]
-    rot, pos = robot.rotations(np.asarray(q, np.float64)), robot.positions(np.asarray(q, np.float64))
-    keep = np.any(obs != 0.0, axis=1)
-    return obs[keep, :3] @ rot.T + pos, obs[keep, 3:6] @ rot.T
-
-
 def cmd_render(args: argparse.Namespace) -> int:
+    from .observers import world_observation
+
+    _check_checkpoint(args, [args.planner])
     scenario = _scenario(args)
     problem = scenario.problem("test", args.seed, seed=0)
     result = None
     if args.planner != "none":
-        result = _planner(args.planner, scenario.robot, args, args.seed).plan(problem)
+        planner = _planner(args.planner, scenario.robot, args, args.seed)
+        result = planner.plan(problem)
         print(f"{args.planner}: success={result.success} nodes={result.nodes} checks={result.collision_checks}")
+        seen = _policy_input(planner)
+        if seen is not None:  # draw what the policy saw
+            args.observation = args.observation or seen[0]
+            args.n_points = args.n_points or seen[1]
     robot = scenario.robot
     if robot.dim == 2:
         from .viz.plot2d import render_problem
 
         if args.gif:
             raise CLIError("--gif animates 3D scenes; for 2D use the PNG")
-        render_problem(problem, args.output, robot, observer_name=args.observation or "surface-normals", n_points=args.n_points or 64, result=result, seed=args.seed)
+        render_problem(
+            problem, args.output, robot, observer_name=args.observation or "surface-normals", n_points=args.n_points or 64, result=result, seed=args.seed
+        )
         print(f"wrote {args.output}")
         return 0
     from .evaluation.evaluate import timed_path
@@ -211,7 +261,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     if observation not in ("global", "local"):
         raise CLIError(f"3D scenes are observed as 'global' or 'local', not {observation!r}")
     path = result.path if result is not None and len(result.path) else None
-    pts, nrm = _world_observation(problem, robot, observation, args.n_points, problem.start, 0, args.seed)
+    pts, nrm = world_observation(problem, robot, observation, args.n_points, problem.start, 0, args.seed)
     title = f"{problem.tag}  ({observation} observation)"
     render_problem_3d(problem, robot, path=path, points=pts, normals=nrm, output=args.output, title=title, obstacles=problem.scene.obstacles_at(0))
     print(f"wrote {args.output}")
@@ -226,7 +276,7 @@ def cmd_render(args: argparse.Namespace) -> int:
             timed,
             args.gif,
             obstacles_at=scene.obstacles_at if scene.dynamic else None,
-            points_at=lambda t: _world_observation(problem, robot, observation, args.n_points, timed[t], t, args.seed)[0],
+            points_at=lambda t: world_observation(problem, robot, observation, args.n_points, timed[t], t, args.seed)[0],
         )
         print(f"wrote {args.gif} ({len(timed)} frames, one per time step)")
     return 0
@@ -240,8 +290,10 @@ def cmd_view(args: argparse.Namespace) -> int:
     if importlib.util.find_spec("viser") is None:
         raise CLIError(VIEWER_MISSING)  # before any planning
     from .evaluation.evaluate import timed_path
+    from .observers import world_observation
     from .viz.viewer import view_problem
 
+    _check_checkpoint(args, [args.planner])
     scenario = _scenario(args)
     robot = scenario.robot
     if robot.dim != 3:
@@ -257,7 +309,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         timed = timed_path(robot, path) if path is not None else problem.start[None]
 
         def points_at(t: int) -> Any:
-            return _world_observation(problem, robot, args.observation, args.n_points, timed[t], t, args.seed)[0]
+            return world_observation(problem, robot, args.observation, args.n_points, timed[t], t, args.seed)[0]
 
     view_problem(problem, robot, path=path, points_at=points_at, port=args.port, host=args.host)
     return 0
@@ -265,47 +317,61 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     from .evaluation import check_path, evaluate, format_table
+    from .evaluation.evaluate import endpoint_fault
 
+    _check_checkpoint(args, [args.planner])
     scenario = _scenario(args)
     if getattr(scenario, "fixed", None):
         problems = scenario.fixed
     else:
         problems = _test_problems(scenario, args, args.episodes)
+    if getattr(args, "start", None) and getattr(args, "goal", None):  # the one problem given
+        fault = endpoint_fault(scenario.robot, problems[0])
+        if fault:
+            raise CLIError(f"the problem of --start and --goal cannot be solved: its {fault} with an obstacle")
     planner = _planner(args.planner, scenario.robot, args, args.seed)
     report = evaluate(planner, problems, scenario.robot, progress=not args.quiet, **_scale(args))
     print(format_table({args.planner: report.metrics()}))
+    invalid = [r for r in report.records if r.invalid]
+    for rec in invalid:
+        print(f"{rec.tag or 'a problem'}: {rec.invalid}, cannot be solved")
     if args.output:
-        _draw_plan(args, scenario.robot, problems[0], report.records[0], planner)
+        _draw_plan(args, scenario.robot, problems[: len(report.records)], report.records, planner)
     if args.json:
-        paths = []
-        for rec in report.records:
-            paths.append({"success": bool(rec.success), "path": np.asarray(rec.path).tolist()})
-        out: dict[str, Any] = {"metrics": report.metrics(), "problems": paths}
-        if getattr(report, "interrupted", None):
+        paths = [{"tag": r.tag, "success": bool(r.success), "invalid": r.invalid, "path": np.asarray(r.path).tolist()} for r in report.records]
+        out: dict[str, Any] = {"planner": args.planner, "metrics": report.metrics(), "problems": paths}
+        if report.interrupted:
             out["interrupted"] = {"finished": report.interrupted[0], "problems": report.interrupted[1]}
         _write_json(args.json, out)
-    if getattr(report, "interrupted", None):
+    if report.interrupted:
         return 130
     ok = all(check_path(scenario.robot, p, r.path) for p, r in zip(problems, report.records) if r.success)
     return 0 if ok else 1
 
 
-def _draw_plan(args: argparse.Namespace, robot: Any, problem: Any, result: Any, planner: Any) -> None:
-    """The first problem, its obstacles (point clouds as their points) and the path of the
-    evaluation's ``result``, in 2D (planned again, to draw Bi-RRT's trees) or 3D."""
+def _draw_plan(args: argparse.Namespace, robot: Any, problems: Sequence[Any], records: Sequence[Any], planner: Any) -> None:
+    """The problems, their obstacles (point clouds as their points) and the paths of the
+    evaluation's records: one problem alone (in 2D planned again, to draw Bi-RRT's trees),
+    several in a grid."""
     Path(args.output).parent.mkdir(parents=True, exist_ok=True)
-    path = np.asarray(result.path) if len(result.path) else None
+    verdicts = [f"{args.planner}, {'solved' if r.success else 'not solved'}" for r in records]
     if robot.dim == 2:
-        from .viz.plot2d import render_problem
+        from .viz.plot2d import render_grid, render_problem
 
-        render_problem(problem, args.output, robot, result=planner.plan(problem), seed=args.seed)
+        if len(problems) == 1:
+            render_problem(problems[0], args.output, robot, result=planner.plan(problems[0]), seed=args.seed)
+        else:
+            render_grid(problems, records, args.output, robot, titles=[f"{p.tag.split('/', 1)[-1]}\n{v}" for p, v in zip(problems, verdicts)])
     else:
-        from .viz.plot3d import render_problem_3d
+        from .viz.plot3d import render_grid_3d, render_problem_3d
 
-        verdict = "solved" if result.success else "not solved"
-        title = f"{problem.tag}: {args.planner}, {verdict}"
-        render_problem_3d(problem, robot, path=path, output=args.output, title=title, obstacles=problem.scene.obstacles_at(0))
-    print(f"wrote {args.output}")
+        paths = [np.asarray(r.path) if len(r.path) else None for r in records]
+        if len(problems) == 1:
+            title = f"{problems[0].tag}: {verdicts[0]}"
+            render_problem_3d(problems[0], robot, path=paths[0], output=args.output, title=title, obstacles=problems[0].scene.obstacles_at(0))
+        else:
+            render_grid_3d(problems, robot, paths, args.output, cols=min(3, len(problems)), titles=[f"{p.tag}: {v}" for p, v in zip(problems, verdicts)])
+    print(f"wrote {args.output} ({len(problems)} problem{'s' if len(problems) != 1 else ''})")
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -372,85 +438,155 @@ def _net_config(args: argparse.Namespace) -> Any:
         return NetConfig(EncoderConfig(args.encoder, 256, 3), head_width=256, head_layers=3, critic_action="points", shared_encoder=False)
     shared = args.encoder_sharing == "shared"
     action = args.critic_action or ("pooled" if shared else "points")
-    return NetConfig(EncoderConfig(args.encoder, args.width, args.layers), head_width=args.width, head_layers=args.layers, critic_action=action, shared_encoder=shared)
+    return NetConfig(
+        EncoderConfig(args.encoder, args.width, args.layers), head_width=args.width, head_layers=args.layers, critic_action=action, shared_encoder=shared
+    )
+
+
+#: train options derived from TrainConfig and SACConfig: flag -> field path
+TRAIN_OPTIONS = {
+    "steps": "total_steps",
+    "num-envs": "num_envs",
+    "warmup-steps": "warmup_steps",
+    "updates-per-step": "updates_per_step",
+    "eval-every": "eval_every",
+    "eval-episodes": "eval_episodes",
+    "target-success": "target_success",
+    "init-actor": "init_actor",
+    "retry-failures": "retry_failures",
+    "mine-episodes": "mine_episodes",
+    "pool-size": "pool_size",
+    "pool-retries": "pool_retries",
+    "lr": "sac.lr",
+    "batch-size": "sac.batch_size",
+    "gamma": "sac.gamma",
+    "tau": "sac.tau",
+    "init-alpha": "sac.init_alpha",
+    "target-entropy-scale": "sac.target_entropy_scale",
+    "her-ratio": "sac.her_ratio",
+    "buffer-size": "sac.buffer_size",
+    "actor-delay": "sac.actor_delay",
+    "policy-avg": "sac.policy_avg",
+}
+
+
+def _resume_config(args: argparse.Namespace) -> Any:
+    """The configuration of the run ``--resume`` continues, with the options given on the
+    command line replacing its own (the networks and the scenario cannot change)."""
+    from .config import from_dict, given_options, replace_paths
+    from .learning.train import TrainConfig
+    from .models.checkpoint import load_checkpoint
+
+    data = load_checkpoint(args.resume)
+    if "trainer" not in data:
+        kind = (
+            "a behavioural-cloning policy (give it to --init-actor)"
+            if "bc_config" in data or "dagger_config" in data
+            else "a policy without the trainer's state"
+        )
+        raise CLIError(f"--resume {args.resume}: this is {kind}; resume from the run's last.pt")
+    cfg = from_dict(TrainConfig, data["train_config"])
+    done = int(data["trainer"]["steps"])
+    cfg = replace_paths(cfg, {**given_options(args, TRAIN_OPTIONS), "device": args.device})
+    if cfg.total_steps <= done:
+        raise CLIError(f"--resume {args.resume}: the run has done {done} steps already; give --steps above {done} to continue it")
+    return cfg
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from .learning.sac import SACConfig
-    from .learning.train import TrainConfig, config_from_dict, train
+    from .config import given_options, replace_paths
+    from .learning.train import TrainConfig, train
 
     if args.resume:
-        from .learning.checkpoint import load_checkpoint
-
-        cfg = config_from_dict(load_checkpoint(args.resume)["train_config"])
-        # settings given on the command line override the run's own; the networks cannot change
-        over: dict[str, object] = {"total_steps": args.steps or cfg.total_steps}
-        for name in ("updates_per_step", "eval_every", "eval_episodes", "target_success", "device", "retry_failures", "mine_episodes"):
-            if getattr(args, name) is not None:
-                over[name] = getattr(args, name)
-        sac_over = {k: getattr(args, k) for k in ("lr", "batch_size", "policy_avg") if getattr(args, k) is not None}
-        if sac_over:
-            over["sac"] = SACConfig(**{**cfg.sac.__dict__, **sac_over})
-        cfg = TrainConfig(**{**cfg.__dict__, **over})
+        cfg = _resume_config(args)
+        run_dir = args.run_dir or str(Path(args.resume).parent)  # the run's own folder
     else:
-        cfg = TrainConfig(
+        base = TrainConfig(
             env=args.env,
             robot=args.robot,
             observation=_default_observation(args),
             n_points=_default_points(args),
-            num_envs=args.num_envs,
-            total_steps=args.steps or 200_000,
-            updates_per_step=0.25 if args.updates_per_step is None else args.updates_per_step,
-            eval_every=args.eval_every or 10_000,
-            eval_episodes=args.eval_episodes or 100,
-            target_success=1.01 if args.target_success is None else args.target_success,
             seed=args.seed,
-            device=args.device or "cpu",
+            device=args.device,
             net=_net_config(args),
-            sac=SACConfig(batch_size=args.batch_size or 256, lr=args.lr or 3e-4, init_alpha=args.init_alpha, actor_delay=args.actor_delay, policy_avg=args.policy_avg or 0.0),
-            init_actor=args.init_actor,
-            retry_failures=args.retry_failures or 0.0,
-            mine_episodes=args.mine_episodes or 0,
         )
+        cfg = replace_paths(base, given_options(args, TRAIN_OPTIONS))
+        run_dir = args.run_dir or "runs/latest"
     scale = _scale(args)
-    res = train(cfg, args.run_dir, progress=not args.quiet, resume=args.resume, sync_every=args.sync_every, **scale)
+    res = train(cfg, run_dir, progress=not args.quiet, resume=args.resume, sync_every=args.sync_every, **scale)
     print(f"best validation success {res.best_success:.3f} after {res.steps} env steps, {res.wall_time_s:.0f} s; checkpoints in {res.run_dir}")
-    return 130 if getattr(res, "interrupted", False) else 0
+    summary = {
+        "run_dir": str(res.run_dir),
+        "best_success": res.best_success,
+        "steps": res.steps,
+        "wall_time_s": res.wall_time_s,
+        "interrupted": res.interrupted,
+    }
+    _write_json(args.json, summary)
+    return 130 if res.interrupted else 0
+
+
+#: bc options derived from DaggerConfig and its BCConfig: flag -> field path
+BC_OPTIONS = {
+    "problems": "bc.n_problems",
+    "epochs": "bc.epochs",
+    "lr": "bc.lr",
+    "batch-size": "bc.batch_size",
+    "refresh-every": "bc.refresh_every",
+    "workers": "bc.workers",
+    "demos": "bc.demos_file",
+    "rollouts": "rollouts",
+    "labels-per-failure": "labels_per_failure",
+    "epochs-per-round": "epochs_per_round",
+    "eval-episodes": "eval_episodes",
+    "expert-max-nodes": "max_nodes",
+}
 
 
 def cmd_bc(args: argparse.Namespace) -> int:
+    from .config import from_dict, given_options, replace_paths
     from .learning.bc import BCConfig, train_bc
+    from .learning.dagger import DaggerConfig, train_dagger
 
-    cfg = BCConfig(
-        env=args.env,
-        robot=args.robot,
-        observation=_default_observation(args),
-        n_points=_default_points(args),
-        n_problems=args.problems,
-        epochs=args.epochs,
-        seed=args.seed,
-        device=args.device,
-        net=_net_config(args),
-        workers=args.workers,
-        address=args.address,
-        demos_file=args.demos,
-    )
-    if args.dagger_rounds or args.resume:
-        from .learning.dagger import DaggerConfig, train_dagger
+    given = {**given_options(args, BC_OPTIONS), "bc.address": args.address}  # (the Ray cluster is this command's)
+    if args.resume:
+        from .models.checkpoint import load_checkpoint
 
-        dcfg = DaggerConfig(cfg, rounds=args.dagger_rounds, rollouts=args.rollouts, epochs_per_round=args.epochs_per_round, eval_episodes=args.eval_episodes)
-        if args.resume:
-            from .learning.checkpoint import load_checkpoint
-            from .learning.dagger import config_from_dict
-
-            dcfg = config_from_dict(load_checkpoint(args.resume)["dagger_config"], rounds=args.dagger_rounds or None)
-            # the Ray cluster is this command's, not the one the run started on
-            dcfg = dataclasses.replace(dcfg, bc=dataclasses.replace(dcfg.bc, address=args.address))
-        summary = train_dagger(dcfg, args.run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume)
+        data = load_checkpoint(args.resume)
+        if "dagger_config" not in data:
+            raise CLIError(f"--resume {args.resume}: not a DAgger checkpoint; resume from a DAgger run's last.pt")
+        cfg = replace_paths(from_dict(DaggerConfig, data["dagger_config"]), given)
+        if args.dagger_rounds:
+            cfg = dataclasses.replace(cfg, rounds=args.dagger_rounds)
     else:
-        summary = train_bc(cfg, args.run_dir, progress=not args.quiet)
-    print(json.dumps(summary, indent=2))
+        bc = BCConfig(
+            env=args.env,
+            robot=args.robot,
+            observation=_default_observation(args),
+            n_points=_default_points(args),
+            seed=args.seed,
+            device=args.device,
+            net=_net_config(args),
+        )
+        cfg = replace_paths(DaggerConfig(bc, rounds=args.dagger_rounds), given)
+    if args.dagger_rounds or args.resume:
+        run_dir = args.run_dir or (str(Path(args.resume).parent) if args.resume else "runs/latest")
+        summary = train_dagger(cfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume)
+    else:
+        summary = train_bc(cfg.bc, args.run_dir or "runs/latest", progress=not args.quiet)
+    print(_bc_line(summary))
+    _write_json(args.json, summary)
     return 0
+
+
+def _bc_line(summary: dict[str, Any]) -> str:
+    """One line for the summary of ``bc`` (cloning alone, or with DAgger)."""
+    if "checkpoint" in summary:  # cloning alone
+        return (
+            f"cloned {summary['demo_steps']} steps of {summary['demo_problems']} demonstrations, final loss {summary['final_loss']:.4f}, "
+            f"{summary['demo_time_s'] + summary['train_time_s']:.0f} s; checkpoint {summary['checkpoint']}"
+        )
+    return f"best validation success {summary['best_success']:.3f} with {summary['demo_steps']} demonstration steps, {summary['wall_time_s']:.0f} s; checkpoints in {summary['run_dir']}"
 
 
 def _default_observation(args: argparse.Namespace) -> str:
@@ -464,12 +600,11 @@ def _default_points(args: argparse.Namespace) -> int:
 
 
 def cmd_convert_checkpoint(args: argparse.Namespace) -> int:
-    from .learning.checkpoint import VERSION
-    from .learning.convert import convert_checkpoint
+    from .models.checkpoint import VERSION
+    from .models.convert import convert_checkpoint
 
     print(
-        f"pointplan: warning: convert-checkpoint fully unpickles {args.old}, which runs any code stored in it; "
-        "convert only files from a source you trust",
+        f"pointplan: warning: convert-checkpoint fully unpickles {args.old}, which runs any code stored in it; convert only files from a source you trust",
         file=sys.stderr,
     )
     notes = convert_checkpoint(args.old, args.new, trust_source=True)
@@ -480,25 +615,155 @@ def cmd_convert_checkpoint(args: argparse.Namespace) -> int:
 
 
 def _add_net(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--env", default="narrow2d", help="scenario to train on (default: %(default)s)")
+    p.add_argument(
+        "--env", default="narrow2d", help="scenario to train on: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d (default: %(default)s)"
+    )
     p.add_argument("--robot", help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot)")
     p.add_argument("--observation", help="2D: surface, surface-normals (default), interior or image; 3D: global (default) or local")
-    p.add_argument("--n-points", type=int, help="observed points (default: 256 for global, else 64)")
-    p.add_argument("--encoder", default="pointnet", help="pointnet, mlp or cnn (use cnn with --observation image)")
-    p.add_argument("--width", type=int, default=64, help="layer width (default: %(default)s)")
-    p.add_argument("--layers", type=int, default=3)
+    p.add_argument("--n-points", type=positive_int, help="observed points (default: 256 for global, else 64)")
+    p.add_argument("--encoder", default="pointnet", help="pointnet, mlp or cnn (use cnn with --observation image) (default: %(default)s)")
+    p.add_argument("--width", type=positive_int, default=64, help="layer width of encoder and head (default: %(default)s)")
+    p.add_argument("--layers", type=positive_int, default=3, help="layers of the per-point encoder and of the head (default: %(default)s)")
     p.add_argument("--encoder-sharing", choices=["shared", "separate"], default="shared", help="one encoder for actor and critics, or one each")
     p.add_argument("--critic-action", choices=["points", "pooled"], help="where the critic sees the action (default: pooled if shared, else points)")
     p.add_argument("--paper", action="store_true", help="the paper's networks: 3 x 256, separate encoders, action on every point")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", default="cpu", help="cpu or cuda")
-    p.add_argument("--run-dir", default="runs/latest", help="where checkpoints and logs go (default: %(default)s)")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seeds the problems, the networks and the validation set (default: %(default)s)")
+    p.add_argument("--device", default="cpu", help="cpu or cuda (default: %(default)s)")
+    p.add_argument("--run-dir", help="where checkpoints and logs go (default: runs/latest; with --resume the checkpoint's folder)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
 def _add_scale(p: argparse.ArgumentParser, what: str = "problems are planned by") -> None:
-    p.add_argument("--workers", type=int, default=None, help=f"{what} this many Ray workers on this machine (pip install 'pointplan[ray]'; default: one process); results equal a serial run's")
+    p.add_argument(
+        "--workers",
+        type=positive_int,
+        default=None,
+        help=f"{what} this many Ray workers on this machine (pip install 'pointplan[ray]'; default: one process); results equal a serial run's",
+    )
     p.add_argument("--address", help="an existing Ray cluster to run the workers on (e.g. auto, or ray://head:10001; see docs/scaling.md)")
+
+
+CLAIMS_EPILOG = (
+    "Every returned path is re-checked by the evaluator (exact clearance along each segment, docs/design.md), and a "
+    "problem counts as solved only if that check passes. 'claims disagree' (planner_claims_disagree in the JSON) counts the problems where the "
+    "planner's own verdict (it says it solved the problem, or that it did not) differs from the check: a planner "
+    "that claims a path the check finds in collision or short of the goal, or one that gives up on a path that "
+    "is in fact valid. It should be 0; see docs/results.md. 'start/goal in collision' (invalid_problems) counts problems that "
+    "cannot be solved as posed."
+)
+
+
+def _subparser(sub: Any, name: str, text: str, **kw: Any) -> argparse.ArgumentParser:
+    """A subcommand with ``text`` as both its one-line help and its description."""
+    p: argparse.ArgumentParser = sub.add_parser(name, help=text, description=text[:1].upper() + text[1:] + ".", **kw)
+    return p
+
+
+def _add_eval_parser(sub: Any) -> None:
+    p = _subparser(sub, "eval", "run planners on a seeded set of test problems and print their metrics", epilog=CLAIMS_EPILOG)
+    _add_common(p)
+    p.add_argument("--episodes", type=positive_int, default=400, help="number of test problems (default: %(default)s)")
+    p.add_argument("--json", help="write the metrics to this file")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_scale(p)
+    p.set_defaults(func=cmd_eval)
+
+
+def _add_render_parser(sub: Any) -> None:
+    p = _subparser(sub, "render", "draw a test problem, what the robot observes and a planner's path to a PNG")
+    _add_common(p)
+    p.add_argument(
+        "--n-points", type=positive_int, help="observed points drawn (default: the policy's with --planner policy or hybrid; else 64, 256 for global)"
+    )
+    p.add_argument("-o", "--output", default="render.png", help="PNG file (default: %(default)s)")
+    p.add_argument("--gif", help="3D: also write an animation of the path, one frame per time step")
+    p.set_defaults(func=cmd_render)
+
+
+def _add_view_parser(sub: Any) -> None:
+    p = _subparser(sub, "view", "show a 3D test problem and a planner's path in the browser (pip install 'pointplan[viewer]')")
+    _add_common(p)
+    p.add_argument("--n-points", type=positive_int, help="observed points shown with --observation (default: the observer's, 256 for global)")
+    p.add_argument("--port", type=int, default=8080, help="port to serve on (default: %(default)s)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on; 0.0.0.0 to serve other machines (default: %(default)s)")
+    p.set_defaults(func=cmd_view)
+
+
+def _add_plan_parser(sub: Any) -> None:
+    p = _subparser(sub, "plan", "plan the problems of a scene file or of a point cloud file (or test problems of --env)", epilog=CLAIMS_EPILOG)
+    _add_common(p)
+    p.add_argument(
+        "--points", help="plan among the points of a cloud file (.ply, .pcd, .npy, .xyz, .txt, .csv; normals estimated if it has none) instead of a scene file"
+    )
+    p.add_argument(
+        "--bounds",
+        help="with --points: the workspace as low then high, e.g. 0,0,1,1; write --bounds=-1,... when the first number is negative (default: the cloud's box grown by 10%% of its largest side)",
+    )
+    p.add_argument("--start", help="plan this start (with --goal) instead of the scene's problems, e.g. 0.1,0.1")
+    p.add_argument("--goal", help="the goal of --start, e.g. 0.9,0.9 (an S-shape takes x,y,z or x,y,z,qx,qy,qz,qw)")
+    p.add_argument("--episodes", type=positive_int, default=10, help="problems to draw when the scene file has none (default: %(default)s)")
+    p.add_argument("-o", "--output", help="draw the problems and their paths to this PNG (a grid when there are several)")
+    p.add_argument("--json", help="write metrics and paths to this file")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_scale(p)
+    p.set_defaults(func=cmd_plan)
+
+
+def _add_train_parser(sub: Any) -> None:
+    from .config import add_config_options
+    from .learning.train import TrainConfig
+
+    p = _subparser(sub, "train", "train a policy with SAC + HER (checkpoints best.pt and last.pt, metrics.csv and TensorBoard logs in --run-dir)")
+    _add_net(p)
+    add_config_options(p, TrainConfig(), TRAIN_OPTIONS)
+    p.add_argument("--resume", help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own")
+    p.add_argument(
+        "--workers",
+        type=positive_int,
+        default=None,
+        help="Ray rollout workers stepping the --num-envs environments (shared out among them) while this process learns (pip install 'pointplan[ray]'; default: one process)",
+    )
+    p.add_argument("--address", help="an existing Ray cluster to run the rollout workers on (see docs/scaling.md)")
+    p.add_argument("--sync-every", type=positive_int, help="with --workers: learner updates between two broadcasts of the actor's weights (default: 16)")
+    p.add_argument("--json", help="also write the summary (best success, steps, time, run folder) to this JSON file")
+    p.set_defaults(func=cmd_train)
+
+
+def _add_bc_parser(sub: Any) -> None:
+    from .config import add_config_options
+    from .learning.dagger import DaggerConfig
+
+    p = _subparser(sub, "bc", "behavioural cloning from Bi-RRT demonstrations, optionally followed by DAgger rounds")
+    _add_net(p)
+    add_config_options(p, DaggerConfig(), BC_OPTIONS)
+    p.add_argument("--address", help="an existing Ray cluster to plan the demonstrations on (see docs/scaling.md)")
+    p.add_argument(
+        "--dagger-rounds",
+        type=non_negative_int,
+        default=0,
+        help="DAgger rounds after cloning: the policy's failed rollouts labelled by Bi-RRT (default: 0, off)",
+    )
+    p.add_argument("--init-actor", help="DAgger: start from this checkpoint's actor instead of cloning first")
+    p.add_argument("--resume", help="DAgger: continue a run from its last.pt (--dagger-rounds sets the new total; options given replace the run's own)")
+    p.add_argument("--json", help="also write the summary to this JSON file")
+    p.set_defaults(func=cmd_bc)
+
+
+def _add_demo_parser(sub: Any) -> None:
+    p = _subparser(sub, "demo", "the shipped policy next to Bi-RRT and the straight line on test problems, with pictures", epilog=CLAIMS_EPILOG)
+    _add_common(p)
+    p.add_argument("--episodes", type=positive_int, help="test problems (default: 400 in 2D, 100 in 3D)")
+    p.add_argument("--figures", type=positive_int, default=8, help="problems drawn (default: %(default)s)")
+    p.add_argument("-o", "--output", default="demo.png", help="figure (default: %(default)s)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=cmd_demo)
+
+
+def _add_convert_parser(sub: Any) -> None:
+    p = _subparser(sub, "convert-checkpoint", "rewrite an older checkpoint holding pickled objects as a data-only one (unpickles OLD: trusted files only)")
+    p.add_argument("old", help="the checkpoint to convert; it is fully unpickled, which can run code")
+    p.add_argument("new", help="where the data-only checkpoint goes")
+    p.set_defaults(func=cmd_convert_checkpoint)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -507,94 +772,17 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="pointplan", description="Neural motion planning from point clouds.")
     parser.add_argument("--version", action="version", version=f"pointplan {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-
-    p = sub.add_parser("eval", help="run planners on a seeded set of test problems")
-    _add_common(p)
-    p.add_argument("--episodes", type=int, default=400, help="number of test problems (default: %(default)s)")
-    p.add_argument("--json", help="write the metrics to this file")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    _add_scale(p)
-    p.set_defaults(func=cmd_eval)
-
-    p = sub.add_parser("render", help="draw a problem, its observation and a planner's path")
-    _add_common(p)
-    p.add_argument("--n-points", type=int, help="observed points (default: 64; 256 for global)")
-    p.add_argument("-o", "--output", default="render.png", help="PNG file (default: %(default)s)")
-    p.add_argument("--gif", help="3D: also write an animation of the path, one frame per time step")
-    p.set_defaults(func=cmd_render)
-
-    p = sub.add_parser("view", help="interactive 3D viewer in the browser (pip install 'pointplan[viewer]')")
-    _add_common(p)
-    p.add_argument("--n-points", type=int, help="observed points")
-    p.add_argument("--port", type=int, default=8080, help="(default: %(default)s)")
-    p.add_argument("--host", default="127.0.0.1", help="0.0.0.0 to serve other machines (default: %(default)s)")
-    p.set_defaults(func=cmd_view)
-
-    p = sub.add_parser("plan", help="plan the problems of a scene file, of a point cloud file (or of --env)")
-    _add_common(p)
-    p.add_argument("--points", help="plan among the points of a cloud file (.ply, .pcd, .npy, .xyz, .txt, .csv; normals estimated if it has none) instead of a scene file")
-    p.add_argument("--bounds", help="with --points: the workspace as low then high, e.g. 0,0,1,1; write --bounds=-1,... when the first number is negative (default: the cloud's box grown by 10%% of its largest side)")
-    p.add_argument("--start", help="plan this start (with --goal) instead of the scene's problems, e.g. 0.1,0.1")
-    p.add_argument("--goal", help="the goal of --start, e.g. 0.9,0.9 (an S-shape takes x,y,z or x,y,z,qx,qy,qz,qw)")
-    p.add_argument("--episodes", type=int, default=10, help="problems to draw when the scene file has none")
-    p.add_argument("-o", "--output", help="draw the first problem to this PNG")
-    p.add_argument("--json", help="write metrics and paths to this file")
-    p.add_argument("--quiet", action="store_true")
-    _add_scale(p)
-    p.set_defaults(func=cmd_plan)
-
-    p = sub.add_parser("train", help="train a policy with SAC + HER")
-    _add_net(p)
-    p.add_argument("--steps", type=int, help="environment steps to collect (default: 200000)")
-    p.add_argument("--num-envs", type=int, default=16, help="workspaces stepping together")
-    p.add_argument("--updates-per-step", type=float, help="gradient steps per env step (default: 0.25)")
-    p.add_argument("--batch-size", type=int, help="default: 256")
-    p.add_argument("--lr", type=float, help="Adam step size of actor, critics and temperature (default: 3e-4)")
-    p.add_argument("--eval-every", type=int, help="env steps between validation runs (default: 10000)")
-    p.add_argument("--eval-episodes", type=int, help="validation problems (default: 100)")
-    p.add_argument("--target-success", type=float, help="stop once validation success reaches this")
-    p.add_argument("--init-actor", help="start the actor from this checkpoint (e.g. a BC one)")
-    p.add_argument("--init-alpha", type=float, default=1.0, help="initial entropy temperature (default: %(default)s)")
-    p.add_argument("--actor-delay", type=int, default=0, help="critic-only updates before the actor moves (default: %(default)s)")
-    p.add_argument("--policy-avg", type=float, help="rate of a running average of the actor's weights, evaluated and saved as the policy (default: 0, off; e.g. 3e-5)")
-    p.add_argument("--retry-failures", type=float, help="share of new episodes that retry a problem the policy failed (default: 0, off; e.g. 0.25)")
-    p.add_argument("--mine-episodes", type=int, help="fresh training problems the deterministic policy attempts at each validation; its failures are retried (default: 0)")
-    p.add_argument("--resume", help="continue a run from its last.pt")
-    p.add_argument("--workers", type=int, default=None, help="Ray rollout workers stepping the --num-envs environments (shared out among them) while this process learns (pip install 'pointplan[ray]'; default: one process)")
-    p.add_argument("--address", help="an existing Ray cluster to run the rollout workers on (see docs/scaling.md)")
-    p.add_argument("--sync-every", type=int, help="with --workers: learner updates between two broadcasts of the actor's weights (default: 16)")
-    p.set_defaults(func=cmd_train)
-
-    p = sub.add_parser("bc", help="behavioural cloning from Bi-RRT demonstrations")
-    _add_net(p)
-    p.add_argument("--problems", type=int, default=2000, help="demonstration problems (default: %(default)s)")
-    p.add_argument("--epochs", type=int, default=30)
-    p.add_argument("--workers", type=int, default=1, help="Ray workers planning the demonstrations (local processes without Ray; default: %(default)s); the demonstrations equal a serial run's")
-    p.add_argument("--address", help="an existing Ray cluster to plan the demonstrations on (see docs/scaling.md)")
-    p.add_argument("--demos", help="demonstrations file (.npz): reused if it exists, written after planning otherwise")
-    p.add_argument("--dagger-rounds", type=int, default=0, help="DAgger rounds after cloning: the policy's failed rollouts labelled by Bi-RRT (default: 0, off)")
-    p.add_argument("--rollouts", type=int, default=400, help="DAgger: training problems attempted per round (default: %(default)s)")
-    p.add_argument("--epochs-per-round", type=float, default=2.0, help="DAgger: passes over all demonstrations per round (default: %(default)s)")
-    p.add_argument("--eval-episodes", type=int, default=200, help="DAgger: validation problems per round (default: %(default)s)")
-    p.add_argument("--init-actor", help="DAgger: start from this checkpoint's actor instead of cloning first")
-    p.add_argument("--resume", help="DAgger: continue a run from its last.pt (--dagger-rounds sets the new total)")
-    p.set_defaults(func=cmd_bc)
-
-    p = sub.add_parser("demo", help="the shipped policy next to Bi-RRT and the straight line on test problems, with pictures")
-    _add_common(p)
-    p.add_argument("--episodes", type=int, help="test problems (default: 400 in 2D, 100 in 3D)")
-    p.add_argument("--figures", type=int, default=8, help="problems drawn (default: %(default)s)")
-    p.add_argument("-o", "--output", default="demo.png", help="figure (default: %(default)s)")
-    p.add_argument("--quiet", action="store_true")
-    p.set_defaults(func=cmd_demo)
-
-    p = sub.add_parser(
-        "convert-checkpoint",
-        help="rewrite an older checkpoint holding pickled objects as a data-only one (unpickles OLD: trusted files only)",
-    )
-    p.add_argument("old", help="the checkpoint to convert; it is fully unpickled, which can run code")
-    p.add_argument("new", help="where the data-only checkpoint goes")
-    p.set_defaults(func=cmd_convert_checkpoint)
+    for add in (
+        _add_eval_parser,
+        _add_render_parser,
+        _add_view_parser,
+        _add_plan_parser,
+        _add_train_parser,
+        _add_bc_parser,
+        _add_demo_parser,
+        _add_convert_parser,
+    ):
+        add(sub)
     return parser
 
 

@@ -209,7 +209,9 @@ class RayPool:
         self.workers, self.address = workers, address
         connect(workers, address)
 
-    def map(self, fn: Callable[..., Any], items: Sequence[Any] | Iterator[Any], chunksize: int | None = None, on_result: Callable[[int, Any], None] | None = None) -> list[Any]:
+    def map(
+        self, fn: Callable[..., Any], items: Sequence[Any] | Iterator[Any], chunksize: int | None = None, on_result: Callable[[int, Any], None] | None = None
+    ) -> list[Any]:
         # ``chunksize`` is accepted for the process pool's signature; chunks are sized by
         # map_ordered (small enough to balance problems of very different costs)
         return map_ordered(fn, list(items), workers=self.workers, address=self.address, on_result=on_result)

@@ -2,13 +2,9 @@
 
 from __future__ import annotations
 
-import math
 import sys
-import time
 from collections.abc import Sequence
 from typing import Any, overload
-
-import numpy as np
 
 from ..robots.base import Robot
 from ..scenes.scene import Problem
@@ -73,25 +69,10 @@ def set_call_number(planner: Any, number: int) -> None:
 def _plan_and_check(pos: int, planner: Any, problems: Sequence[Problem], robot: Robot, first_call: int, resolution: float, tolerance: float) -> Any:
     """One problem of an evaluation, in a worker: what the serial loop of
     :func:`~pointplan.evaluation.evaluate` does for it."""
-    from ..evaluation.evaluate import EpisodeRecord, check_path, path_length
+    from ..evaluation.evaluate import plan_and_check
 
-    problem = problems[pos]
     set_call_number(planner, first_call + pos)
-    t0 = time.perf_counter()
-    result = planner.plan(problem)
-    elapsed = time.perf_counter() - t0
-    path = np.asarray(result.path, np.float64)
-    ok = len(path) > 0 and check_path(robot, problem, path, resolution, tolerance)
-    return EpisodeRecord(
-        tag=problem.tag,
-        success=bool(ok),
-        claimed_success=bool(result.success),
-        nodes=int(result.nodes),
-        collision_checks=int(result.collision_checks),
-        path_length=path_length(robot, path) if ok else math.nan,
-        time_s=elapsed,
-        path=path,
-    )
+    return plan_and_check(planner, problems[pos], robot, resolution, tolerance)
 
 
 def evaluate_parallel(
@@ -131,7 +112,9 @@ def evaluate_parallel(
             bar.set_postfix(success=f"{solved[0] / solved[1]:.1%}")
 
     try:
-        records = map_ordered(_plan_and_check, range(n), workers=workers, address=address, shared=(planner, problems, robot, first_call, resolution, tolerance), on_result=tick)
+        records = map_ordered(
+            _plan_and_check, range(n), workers=workers, address=address, shared=(planner, problems, robot, first_call, resolution, tolerance), on_result=tick
+        )
         interrupted = None
     except Interrupted as stop:
         records = [stop.results[i] for i in sorted(stop.results)]
@@ -141,6 +124,6 @@ def evaluate_parallel(
         if bar is not None:
             bar.close()
     report.records.extend(records)
-    report.interrupted = interrupted  # type: ignore[attr-defined]
+    report.interrupted = interrupted
     set_call_number(planner, first_call + n)
     return report

@@ -31,8 +31,6 @@ STEPS_PER_CALL = 10
 #: learner updates between two weight broadcasts
 SYNC_EVERY = 16
 
-_KEYS = ("obs", "next_obs", "q", "q_next", "goal", "action", "action_norm", "collided")
-
 
 class RolloutWorker:
     """Environments of one worker and a copy of the actor (runs as a Ray actor)."""
@@ -40,14 +38,16 @@ class RolloutWorker:
     def __init__(self, cfg: dict[str, Any], index: int, num_envs: int) -> None:
         import torch
 
+        from ..config import from_dict
         from ..envs.core import BatchedCore, EnvConfig
         from ..learning.curriculum import EpisodeSource
-        from ..learning.train import config_from_dict
+        from ..learning.replay import EpisodeStaging
+        from ..learning.train import TrainConfig
         from ..models.actor_critic import Actor
         from ..scenes.scenarios import make_scenario
 
         torch.set_num_threads(1)
-        self.cfg = c = config_from_dict(cfg)
+        self.cfg = c = from_dict(TrainConfig, cfg)
         scenario = make_scenario(c.env, robot=c.robot)
         self.robot = scenario.robot
         self.core = BatchedCore(scenario, num_envs, EnvConfig(observation=c.observation, n_points=c.n_points, split="train"))
@@ -59,17 +59,7 @@ class RolloutWorker:
         self.source = EpisodeSource(self.core, None, 0.0)
         self.source.reset(range(num_envs), self.rng)
         self.obs = self.core.observe(self.rng)["observation"]
-        e, h, cdim, tdim = num_envs, self.core.horizon, self.robot.config_dim, self.robot.twist_dim
-        self.st = {
-            "obs": np.zeros((e, h) + obs_shape, np.float32),
-            "next_obs": np.zeros((e, h) + obs_shape, np.float32),
-            "q": np.zeros((e, h, cdim)),
-            "q_next": np.zeros((e, h, cdim)),
-            "goal": np.zeros((e, h, cdim)),
-            "action": np.zeros((e, h, tdim), np.float32),
-            "action_norm": np.zeros((e, h)),
-            "collided": np.zeros((e, h), bool),
-        }
+        self.staging = EpisodeStaging(num_envs, self.core.horizon, obs_shape, self.robot.config_dim, self.robot.twist_dim)
 
     def _act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
         import torch
@@ -89,9 +79,8 @@ class RolloutWorker:
         if version != self.weights_version and weights is not None:
             self.actor.load_state_dict(weights)
             self.weights_version = version
-        core, st, rng = self.core, self.st, self.rng
+        core, rng = self.core, self.rng
         e = core.num_envs
-        rows = np.arange(e)
         episodes: list[tuple[np.ndarray, ...]] = []
         success: list[float] = []
         obs = self.obs
@@ -104,14 +93,22 @@ class RolloutWorker:
             t_idx = core.t.copy()
             _, term, trunc, info = core.step(actions)
             next_obs = core.observe(rng)["observation"]
-            for k, v in (("obs", obs), ("next_obs", next_obs), ("q", q), ("q_next", core.q), ("goal", goal), ("action", actions), ("action_norm", info["action_norm"]), ("collided", info["collided"])):
-                st[k][rows, t_idx] = v
             done = term | trunc
+            ended = self.staging.add(
+                t_idx,
+                done,
+                obs=obs,
+                next_obs=next_obs,
+                q=q,
+                q_next=core.q,
+                goal=goal,
+                action=actions,
+                action_norm=info["action_norm"],
+                collided=info["collided"],
+            )
+            episodes += [tuple(a.copy() for a in episode) for episode in ended]
             if done.any():
-                for i in np.flatnonzero(done):
-                    n = int(t_idx[i]) + 1
-                    episodes.append(tuple(st[k][i, :n].copy() for k in _KEYS))
-                    success.append(float(term[i]))
+                success += [float(term[i]) for i in np.flatnonzero(done)]
                 self.source.reset(np.flatnonzero(done).tolist(), rng)
                 fresh = core.observe(rng)["observation"]
                 next_obs = np.where(done.reshape((-1,) + (1,) * (next_obs.ndim - 1)), fresh, next_obs)
@@ -129,7 +126,7 @@ class RayRollouts:
     workers; a second Ctrl-C interrupts at once."""
 
     def __init__(self, cfg: Any, workers: int | None, address: str | None, sync_every: int = SYNC_EVERY, steps_per_call: int = STEPS_PER_CALL) -> None:
-        from ..learning.checkpoint import to_dict
+        from ..models.checkpoint import to_dict
         from . import cluster_cpus, connect
 
         ray = connect(workers, address)

@@ -33,14 +33,6 @@ def make_vector_env(scenario: str, num_envs: int = 16, **kwargs: Any) -> Plannin
     return PlanningVectorEnv(scenario, num_envs=num_envs, **kwargs)
 
 
-def make_narrow2d(**kwargs: Any) -> PlanningEnv:
-    return PlanningEnv("narrow2d", **kwargs)
-
-
-def make_narrow2d_vector(num_envs: int = 16, **kwargs: Any) -> PlanningVectorEnv:
-    return PlanningVectorEnv("narrow2d", num_envs=num_envs, **kwargs)
-
-
 def register_envs() -> None:
     """Register the package's ids with Gymnasium (done on import of ``pointplan``)."""
     from functools import partial

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ..geometry.collision import CollisionWorld
 from ..observers import make_observer
@@ -102,6 +102,19 @@ def q_free(
     return new_q, chk.collided, chk.checks
 
 
+def goal_reached(robot: Robot, config: EnvConfig, achieved: Array, desired: Array, collided: Bool | None = None) -> Bool:
+    """The success rule: within the goal tolerance of ``desired`` (in a step that did not
+    collide, when ``collided`` is given)."""
+    ok = robot.distance(achieved, desired) < config.goal_tolerance
+    return ok if collided is None else ok & ~np.asarray(collided, bool)
+
+
+def step_reward(config: EnvConfig, action_norm: Array, collided: Bool, success: Bool) -> Array:
+    """The reward rule: ``-|a| + (free | collided penalty) + success bonus``."""
+    c = config
+    return -np.asarray(action_norm) + np.where(collided, c.reward_collision, c.reward_free) + c.reward_success * success
+
+
 class BatchedCore:
     """``E`` planning environments of one scenario stepping in lockstep."""
 
@@ -182,14 +195,12 @@ class BatchedCore:
         }
 
     def success(self, achieved: Array, desired: Array, collided: Bool | None = None) -> Bool:
-        ok = self.robot.distance(achieved, desired) < self.config.goal_tolerance
-        return ok if collided is None else ok & ~np.asarray(collided, bool)
+        return goal_reached(self.robot, self.config, achieved, desired, collided)
 
     def reward(self, action_norm: Array, collided: Bool, success: Bool) -> Array:
-        c = self.config
-        return -np.asarray(action_norm) + np.where(collided, c.reward_collision, c.reward_free) + c.reward_success * success
+        return step_reward(self.config, action_norm, collided, success)
 
-    def step(self, actions: Array) -> tuple[Array, Bool, Bool, dict[str, Any]]:
+    def step(self, actions: ArrayLike) -> tuple[Array, Bool, Bool, dict[str, Any]]:
         """Apply actions ``(E, twist_dim)`` in [-1, 1]: returns reward, terminated,
         truncated and per-environment info arrays. Observations come from ``observe``."""
         a = np.clip(np.asarray(actions, np.float64).reshape(self.num_envs, self.robot.twist_dim), -1.0, 1.0)

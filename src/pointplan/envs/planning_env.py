@@ -26,10 +26,10 @@ def _resolve(scenario: str | Scenario, robot: str | None = None) -> Scenario:
 
 def _goal_space(core: BatchedCore) -> spaces.Box:
     robot = core.robot
-    ref = core.scenario.scene("test", 0)
+    bounds_low, bounds_high = core.scenario.bounds
     low = np.full(robot.config_dim, -1.0, dtype=np.float32)
     high = np.full(robot.config_dim, 1.0, dtype=np.float32)
-    low[: robot.dim], high[: robot.dim] = ref.low, ref.high
+    low[: robot.dim], high[: robot.dim] = bounds_low, bounds_high
     return spaces.Box(low, high, dtype=np.float32)
 
 
@@ -69,12 +69,11 @@ class PlanningEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
         self.core = BatchedCore(_resolve(scenario, robot), 1, self.config)
         self.robot = self.core.robot
         self.render_mode = render_mode
-        self.observation_space = spaces.Dict(
+        self.observation_space = spaces.Dict(  # type: ignore[assignment]  # (gymnasium's Dict is not generic in its value type)
             {"observation": self.core.observer.space, "achieved_goal": _goal_space(self.core), "desired_goal": _goal_space(self.core)}
         )
         k = self.robot.twist_dim
         self.action_space = spaces.Box(-1.0, 1.0, shape=(k,), dtype=np.float32)
-        self._rng = np.random.default_rng()
 
     @property
     def problem(self) -> Problem:
@@ -84,14 +83,12 @@ class PlanningEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
         return Problem(scene, self.core.q[0].copy(), self.core.goal[0].copy())
 
     def _obs(self) -> dict[str, NDArray[np.float32]]:
-        return {k: v[0] for k, v in self.core.observe(self._rng).items()}
+        return {k: v[0] for k, v in self.core.observe(self.np_random).items()}
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
-        super().reset(seed=seed)
-        if seed is not None:
-            self._rng = np.random.default_rng(seed)
+        super().reset(seed=seed)  # seeds self.np_random, the env's one generator
         problem = (options or {}).get("problem")
-        self.core.reset_envs([0], self._rng, [problem] if problem is not None else None)
+        self.core.reset_envs([0], self.np_random, [problem] if problem is not None else None)
         return self._obs(), {}
 
     def step(self, action: NDArray[np.float32]) -> tuple[dict[str, NDArray[np.float32]], float, bool, bool, dict[str, Any]]:
@@ -119,7 +116,7 @@ class PlanningEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
         return render_rgb(self.problem, self.robot, self.core.q[0])
 
 
-class PlanningVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float32], NDArray[np.float32]]):
+class PlanningVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float32], NDArray[Any]]):
     """``num_envs`` environments, each in its own workspace, stepping in one batched call.
 
     Autoreset is "same step": when an episode ends, the returned observation already
@@ -140,22 +137,23 @@ class PlanningVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.flo
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(self.robot.twist_dim,), dtype=np.float32)
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, self.num_envs)
-        self._rng = np.random.default_rng()
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
-        if seed is not None:
-            self._rng = np.random.default_rng(seed if isinstance(seed, int) else list(seed))
+        if isinstance(seed, int) or seed is None:
+            super().reset(seed=seed)  # seeds self.np_random, the env's one generator
+        else:  # one seed per environment: the generator is drawn from all of them
+            self.np_random = np.random.default_rng(list(seed))
         problems: Sequence[Problem | None] | None = (options or {}).get("problems")
-        self.core.reset_envs(range(self.num_envs), self._rng, problems)
-        return self.core.observe(self._rng), {}
+        self.core.reset_envs(range(self.num_envs), self.np_random, problems)
+        return self.core.observe(self.np_random), {}
 
     def step(self, actions: NDArray[np.float32]) -> tuple[dict[str, NDArray[np.float32]], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Any]]:
         reward, term, trunc, info = self.core.step(actions)
         done = term | trunc
         infos: dict[str, Any] = dict(info)
         if done.any():
-            infos["final_obs"] = self.core.observe(self._rng)
+            infos["final_obs"] = self.core.observe(self.np_random)
             infos["final_info"] = {k: v.copy() for k, v in info.items()}
             infos["_final"] = done.copy()
-            self.core.reset_envs(np.flatnonzero(done).tolist(), self._rng)
-        return self.core.observe(self._rng), reward, term, trunc, infos
+            self.core.reset_envs(np.flatnonzero(done).tolist(), self.np_random)
+        return self.core.observe(self.np_random), reward, term, trunc, infos

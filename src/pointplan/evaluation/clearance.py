@@ -88,7 +88,9 @@ def _obstacle(s: Shape) -> _Obstacle:
         return _Obstacle(coal.Capsule(float(s.radius), 2 * half), _tf(_frame_z(b - a), (a + b) / 2), (a + b) / 2, half + float(s.radius))
     if isinstance(s, (Cylinder, Cone)):
         kind = coal.Cylinder if isinstance(s, Cylinder) else coal.Cone
-        return _Obstacle(kind(float(s.radius), float(s.length)), _tf(s.rotation, s.center), np.asarray(s.center, np.float64), math.hypot(s.radius, s.length / 2))
+        return _Obstacle(
+            kind(float(s.radius), float(s.length)), _tf(s.rotation, s.center), np.asarray(s.center, np.float64), math.hypot(s.radius, s.length / 2)
+        )
     if isinstance(s, Mesh):
         model = coal.BVHModelOBBRSS()
         model.beginModel(len(s.faces), len(s.vertices))

@@ -8,6 +8,7 @@ the planner says; the two are both recorded and disagreements counted.
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -16,10 +17,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..robots.motion import intervals
-from .clearance import Clearance, advance
+from ..planners.base import path_length
 from ..robots.base import Robot
+from ..robots.motion import intervals
 from ..scenes.scene import Problem
+from .clearance import Clearance, advance
 
 Array = NDArray[np.float64]
 
@@ -138,14 +140,6 @@ def densify(robot: Robot, path: Array, resolution: float) -> Array:
     return robot.integrate(q0[idx], v[idx] * s[:, None])
 
 
-def path_length(robot: Robot, path: Array) -> float:
-    """Sum of geodesic distances between consecutive configurations."""
-    path = np.asarray(path, np.float64)
-    if len(path) < 2:
-        return 0.0
-    return float(np.sum(robot.distance(path[:-1], path[1:])))
-
-
 @dataclass
 class EpisodeRecord:
     """One problem of an evaluation."""
@@ -163,6 +157,8 @@ class EpisodeRecord:
     #: wall time of ``planner.plan``, seconds (measured by the evaluator)
     time_s: float
     path: Array = field(repr=False)
+    #: why the problem cannot be solved as posed ("start in collision", ...), or ""
+    invalid: str = ""
 
 
 def _mean(xs: Sequence[float]) -> float:
@@ -179,6 +175,8 @@ class EvalReport:
 
     planner: str
     records: list[EpisodeRecord] = field(default_factory=list)
+    #: stopped by Ctrl-C: ``(finished, total)`` problems (the records are the finished ones)
+    interrupted: tuple[int, int] | None = None
 
     def metrics(self) -> dict[str, Any]:
         """Success rate; nodes, collision checks and time over *all* problems (and nodes over
@@ -202,6 +200,7 @@ class EvalReport:
             "time_mean_s": _mean(times),
             "time_median_s": _median(times),
             "planner_claims_disagree": sum(1 for x in r if x.success != x.claimed_success),
+            "invalid_problems": sum(1 for x in r if x.invalid),
         }
 
 
@@ -233,29 +232,47 @@ def evaluate(
 
         it = tqdm(problems, desc=report.planner, unit="problem")
     n_ok = 0
-    for problem in it:
-        t0 = time.perf_counter()
-        result = planner.plan(problem)
-        elapsed = time.perf_counter() - t0
-        path = np.asarray(result.path, np.float64)
-        ok = len(path) > 0 and bool(check_path(robot, problem, path, resolution, tolerance))
-        n_ok += ok
-        report.records.append(
-            EpisodeRecord(
-                tag=problem.tag,
-                success=bool(ok),
-                claimed_success=bool(result.success),
-                nodes=int(result.nodes),
-                collision_checks=int(result.collision_checks),
-                # counted to the goal: a path that stops within the tolerance is charged the rest
-                path_length=path_length(robot, path) + float(robot.distance(path[-1], problem.goal)) if ok else math.nan,
-                time_s=elapsed,
-                path=path,
-            )
-        )
+    try:
+        for problem in it:
+            report.records.append(plan_and_check(planner, problem, robot, resolution, tolerance))
+            n_ok += report.records[-1].success
+            if progress:
+                it.set_postfix(success=f"{n_ok / len(report.records):.1%}")
+    except KeyboardInterrupt:  # keep what finished, as the Ray path does
         if progress:
-            it.set_postfix(success=f"{n_ok / len(report.records):.1%}")
+            it.close()
+        report.interrupted = (len(report.records), len(problems))
+        print(f"\ninterrupted: kept the {len(report.records)} of {len(problems)} problems that finished", file=sys.stderr)
     return report
+
+
+def endpoint_fault(robot: Robot, problem: Problem) -> str:
+    """ "start in collision", "goal in collision", "start and goal in collision" (against
+    the obstacles at time 0), or "" when both are free."""
+    hit = np.asarray(robot.collides(problem.scene.world, np.stack([problem.start, problem.goal])), bool)
+    which = [name for name, h in zip(("start", "goal"), hit) if h]
+    return f"{' and '.join(which)} in collision" if which else ""
+
+
+def plan_and_check(planner: Any, problem: Problem, robot: Robot, resolution: float = 0.01, tolerance: float = 0.07) -> EpisodeRecord:
+    """One problem planned and its path re-checked."""
+    t0 = time.perf_counter()
+    result = planner.plan(problem)
+    elapsed = time.perf_counter() - t0
+    path = np.asarray(result.path, np.float64)
+    ok = len(path) > 0 and bool(check_path(robot, problem, path, resolution, tolerance))
+    return EpisodeRecord(
+        invalid=endpoint_fault(robot, problem),
+        tag=problem.tag,
+        success=bool(ok),
+        claimed_success=bool(result.success),
+        nodes=int(result.nodes),
+        collision_checks=int(result.collision_checks),
+        # counted to the goal: a path that stops within the tolerance is charged the rest
+        path_length=path_length(robot, path) + float(robot.distance(path[-1], problem.goal)) if ok else math.nan,
+        time_s=elapsed,
+        path=path,
+    )
 
 
 _ROWS = [
@@ -271,6 +288,7 @@ _ROWS = [
     ("time_mean_s", "time s (mean)"),
     ("time_median_s", "time s (median)"),
     ("planner_claims_disagree", "claims disagree"),
+    ("invalid_problems", "start/goal in collision"),
 ]
 
 

@@ -1,16 +1,12 @@
-"""Compiled (numba) kernels for the hottest collision test: oriented boxes against oriented
-boxes. Falls back to the numpy version in ``collision.py`` when numba is missing."""
+"""Compiled (numba) kernels for the hottest collision test (oriented boxes against oriented
+boxes) and for rays against boxes. The numpy versions in ``collision.py`` (``obb_overlap``)
+and ``raycast.py`` (``box_slabs_reference``) compute the same and are what the tests compare
+them with."""
 
 from __future__ import annotations
 
+import numba
 import numpy as np
-
-try:
-    import numba
-
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover - numba is a dependency, but keep working without it
-    HAVE_NUMBA = False
 
 
 def _obb_overlap_flat(ca, ra, ha, cb, rb, hb, out):  # type: ignore[no-untyped-def]
@@ -68,8 +64,7 @@ def _obb_overlap_flat(ca, ra, ha, cb, rb, hb, out):  # type: ignore[no-untyped-d
                 out[b, i, j] = not sep
 
 
-if HAVE_NUMBA:
-    _obb_overlap_flat = numba.njit(cache=True, nogil=True)(_obb_overlap_flat)
+_obb_overlap_flat = numba.njit(cache=True, nogil=True)(_obb_overlap_flat)
 
 
 def obb_overlap_compiled(ca, ra, ha, cb, rb, hb):  # type: ignore[no-untyped-def]
@@ -133,8 +128,7 @@ def _ray_box_flat(o, d, c, rot, h, t0, t1, axis):  # type: ignore[no-untyped-def
                 axis[b, r, k] = ax
 
 
-if HAVE_NUMBA:
-    _ray_box_flat = numba.njit(cache=True, nogil=True, error_model="numpy")(_ray_box_flat)
+_ray_box_flat = numba.njit(cache=True, nogil=True, error_model="numpy")(_ray_box_flat)
 
 
 def ray_box_compiled(o, d, c, rot, h):  # type: ignore[no-untyped-def]
@@ -145,5 +139,14 @@ def ray_box_compiled(o, d, c, rot, h):  # type: ignore[no-untyped-def]
     t1 = np.empty((nb, nr, nk))
     axis = np.empty((nb, nr, nk), np.int8)
     f = np.ascontiguousarray
-    _ray_box_flat(f(o, dtype=np.float64), f(np.broadcast_to(d, o.shape), dtype=np.float64), f(c, dtype=np.float64), f(rot, dtype=np.float64), f(h, dtype=np.float64), t0, t1, axis)
+    _ray_box_flat(
+        f(o, dtype=np.float64),
+        f(np.broadcast_to(d, o.shape), dtype=np.float64),
+        f(c, dtype=np.float64),
+        f(rot, dtype=np.float64),
+        f(h, dtype=np.float64),
+        t0,
+        t1,
+        axis,
+    )
     return t0, t1, axis

@@ -3,8 +3,8 @@
 They compute what :class:`~pointplan.robots.sshape.SShape` computes through 4x4 matrices
 (``lie.se3_exp`` / ``lie.relative_twist``) directly on quaternions, one pose at a time, so
 that planners calling them with a handful of configurations do not pay numpy's per-call
-overhead. Without numba the functions below are plain Python (correct but slow); callers
-check ``HAVE_NUMBA`` and keep their numpy path instead.
+overhead. The numpy path through 4x4 matrices (``SShape._integrate_numpy`` / ``_log_numpy``,
+``NumpySShape``) is the reference they are tested against.
 
 Conventions match :mod:`pointplan.geometry.lie`: twists are body-frame ``(v, w)``,
 translation first; input quaternions are normalised; output quaternions have ``w >= 0``.
@@ -19,14 +19,8 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
-
-try:
-    import numba
-
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover - numba is a dependency, but keep working without it
-    HAVE_NUMBA = False
 
 #: below this angle the coefficients that divide by powers of it use Taylor series
 _SMALL = 1e-4
@@ -163,12 +157,11 @@ def _pose_log_flat(q0, q1, out):  # type: ignore[no-untyped-def]
         out[i, 5] = wz
 
 
-if HAVE_NUMBA:
-    # error_model="numpy": a zero quaternion gives nan (as the numpy path does), not an exception
-    _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
-    _half_turn_sign = _jit(_half_turn_sign)
-    _pose_integrate_flat = _jit(_pose_integrate_flat)
-    _pose_log_flat = _jit(_pose_log_flat)
+# error_model="numpy": a zero quaternion gives nan (as the numpy path does), not an exception
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+_half_turn_sign = _jit(_half_turn_sign)
+_pose_integrate_flat = _jit(_pose_integrate_flat)
+_pose_log_flat = _jit(_pose_log_flat)
 
 
 def pose_integrate_compiled(q: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -115,8 +115,7 @@ def _read_table(path: Path) -> tuple[Array, Array | None]:
     data = data.astype(np.float64)
     if data.ndim != 2 or data.shape[1] not in (2, 3, 4, 6) or data.shape[0] == 0:
         raise CloudError(
-            f"points file {path.name!r}: expected an array (P, 2) or (P, 3) of points, or (P, 4) or (P, 6) of "
-            f"points and normals, got shape {data.shape}"
+            f"points file {path.name!r}: expected an array (P, 2) or (P, 3) of points, or (P, 4) or (P, 6) of points and normals, got shape {data.shape}"
         )
     c = data.shape[1]
     if c in (4, 6):

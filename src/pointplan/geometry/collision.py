@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from ._kernels import HAVE_NUMBA, obb_overlap_compiled
+from ._kernels import obb_overlap_compiled
 from .shapes import Box, Capsule, Cone, Cylinder, Mesh, PointCloud, Shape, Sphere
 
 Array = NDArray[np.float64]
@@ -139,30 +139,6 @@ def _obb_pairs(ca: Array, ra: Array, ha: Array, cb: Array, rb: Array, hb: Array)
     return ~sep
 
 
-def _obb_overlap_dense(ca: Array, ra: Array, ha: Array, cb: Array, rb: Array, hb: Array) -> Bool:
-    """The same test without the prefilter, on all ``(..., M, K)`` pairs (kept for tests)."""
-    rel = np.einsum("...mji,...kjl->...mkil", ra, rb)  # R = Ra^T Rb
-    t = np.einsum("...mji,...mkj->...mki", ra, cb[..., None, :, :] - ca[..., :, None, :])
-    absr = np.abs(rel) + 1e-9
-    hA = ha[..., :, None, :]  # (..., M, 1, 3)
-    hB = hb[..., None, :, :]  # (..., 1, K, 3)
-    # Face axes of A and of B.
-    sep = np.any(np.abs(t) > hA + np.einsum("...ij,...j->...i", absr, np.broadcast_to(hB, t.shape)), -1)
-    tb = np.einsum("...i,...ij->...j", t, rel)
-    sep |= np.any(np.abs(tb) > np.einsum("...i,...ij->...j", np.broadcast_to(hA, t.shape), absr) + hB, -1)
-    # Nine edge-edge axes A_i x B_j.
-    i1, i2 = np.array([1, 2, 0]), np.array([2, 0, 1])
-    ta1 = t[..., i1][..., :, None]
-    ta2 = t[..., i2][..., :, None]
-    lhs = np.abs(ta2 * rel[..., i1, :] - ta1 * rel[..., i2, :])
-    hAb = np.broadcast_to(hA, t.shape)
-    hBb = np.broadcast_to(hB, t.shape)
-    ra_term = hAb[..., i1][..., :, None] * absr[..., i2, :] + hAb[..., i2][..., :, None] * absr[..., i1, :]
-    rb_term = hBb[..., None, i1] * absr[..., :, i2] + hBb[..., None, i2] * absr[..., :, i1]
-    sep |= np.any(lhs > ra_term + rb_term, axis=(-1, -2))
-    return ~sep
-
-
 # ---------------------------------------------------------------------------- world
 @dataclass
 class CollisionWorld:
@@ -210,6 +186,7 @@ class CollisionWorld:
         caps = [s for s in shapes if isinstance(s, Capsule)]
         cyls = [s for s in shapes if isinstance(s, Cylinder)]
         cones = [s for s in shapes if isinstance(s, Cone)]
+        coal_shapes: list[Shape] = [*caps, *cyls, *cones]
         meshes = [s for s in shapes if isinstance(s, Mesh)]
         clouds = [s for s in shapes if isinstance(s, PointCloud)]
         for s in shapes:
@@ -246,7 +223,7 @@ class CollisionWorld:
             con_half=np.array([c.length / 2 for c in cones], dtype=np.float64),
             cloud_trees=[tree],
             coal_objects=[coal_objs],
-            shapes=[list(caps) + list(cyls) + list(cones)],
+            shapes=[coal_shapes],
             coal_items=[
                 [(g, tf, *_bounding_sphere(m), m) for m, (g, tf) in zip(meshes, coal_objs)]
                 + ([(*_coal_primitive(sh), *_bounding_sphere(sh), None) for sh in list(caps) + list(cyls) + list(cones)] if d == 3 else [])
@@ -356,7 +333,7 @@ class CollisionWorld:
         h = np.broadcast_to(np.asarray(halfs, np.float64), c.shape)
         hit = np.zeros(c.shape[:-1], dtype=bool)
         if self.box_c.shape[-2]:
-            if HAVE_NUMBA and c.shape[:-2] == self.batch_shape:
+            if c.shape[:-2] == self.batch_shape:
                 hit |= np.any(obb_overlap_compiled(c, rot, h, self.box_c, self.box_r, self.box_h), -1)
             else:
                 hit |= np.any(obb_overlap(c, rot, h, self.box_c, self.box_r, self.box_h), -1)

@@ -51,9 +51,7 @@ def so3_log(r: Array) -> Array:
     """Rotation vectors ``(..., 3)`` (angle in [0, pi]) from rotation matrices."""
     r = np.asarray(r, dtype=np.float64)
     cos = (np.trace(r, axis1=-2, axis2=-1) - 1.0) / 2.0
-    vee = np.stack(
-        [r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0], r[..., 1, 0] - r[..., 0, 1]], -1
-    )
+    vee = np.stack([r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0], r[..., 1, 0] - r[..., 0, 1]], -1)
     # arctan2 keeps full precision at both ends, where arccos of the trace does not
     theta = np.arctan2(np.linalg.norm(vee, axis=-1) / 2.0, cos)
     small = theta < 1e-4

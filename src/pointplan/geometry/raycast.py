@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._kernels import HAVE_NUMBA, ray_box_compiled
+from ._kernels import ray_box_compiled
 from .collision import CollisionWorld
 from .shapes import Mesh
 
@@ -89,7 +89,7 @@ class RayHits:
 
 
 # ---------------------------------------------------------------------------- intervals
-def _slab(o: Array, d: Array, lo: Array, hi: Array) -> tuple[Array, Array]:
+def _slab(o: Array, d: Array, lo: Array | float, hi: Array | float) -> tuple[Array, Array]:
     """Parameters ``t`` with ``lo <= o + t d <= hi`` as an interval (``(inf, -inf)`` if
     empty); ``d`` is a component of a unit vector."""
     par = np.abs(d) < _PAR
@@ -178,8 +178,12 @@ def _disc_iv(ox: Array, oy: Array, dx: Array, dy: Array, r: Array) -> tuple[Arra
 # ------------------------------------------------------------------------ primitive groups
 # Each returns t0, t1: (B, r, K) and an int8 "part" code (which face the ray enters by).
 def _box(o: Array, d: Array, g: dict[str, Array]) -> tuple[Array, Array, NDArray[np.int8]]:
-    if HAVE_NUMBA:  # the same slab test, compiled (about 10x faster)
-        return ray_box_compiled(o, d, g["box_c"], g["box_r"], g["box_h"])
+    return ray_box_compiled(o, d, g["box_c"], g["box_r"], g["box_h"])
+
+
+def box_slabs_reference(o: Array, d: Array, g: dict[str, Array]) -> tuple[Array, Array, NDArray[np.int8]]:
+    """The slab test of ``_box`` in numpy: the reference the compiled kernel (about 10x
+    faster) is tested against."""
     ol, dl = _to_local(o, d, g["box_c"], g["box_r"])
     h = g["box_h"][:, None]
     # slabs; a direction component of 0 gives inv = +-inf and so infinite bounds, or nan
@@ -350,7 +354,7 @@ def _intersector_class() -> Any:
     try:
         from trimesh.ray.ray_pyembree import RayMeshIntersector
     except ImportError:  # pragma: no cover - embreex is a dependency here
-        from trimesh.ray.ray_triangle import RayMeshIntersector
+        from trimesh.ray.ray_triangle import RayMeshIntersector  # type: ignore[assignment]
     return RayMeshIntersector
 
 
@@ -371,7 +375,7 @@ def _mesh_set(meshes: Sequence[Mesh]) -> _MeshSet:
             tm.invert()
         parts.append(tm)
         solid.append(np.full(len(tm.faces), closed))
-    combined = parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
+    combined: Any = parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
     intersector = _intersector_class()(combined)
     intersector.intersects_first(np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0]]))  # build now
     normals = np.asarray(combined.face_normals, np.float64)
@@ -425,6 +429,30 @@ def cast_rays(world: CollisionWorld, origins: Array, directions: Array, max_rang
     normalised). Hits farther than ``max_range`` are dropped. See the module docstring for
     the conventions (rays from inside, misses, normals, point clouds).
     """
+    batch, o, d, max_range = _checked_rays(world, origins, directions, max_range)
+    nb = int(np.prod(batch, dtype=np.int64))
+    n_rays = o.shape[-2]
+    o2, d2 = o.reshape(nb, n_rays, 3), d.reshape(nb, n_rays, 3)
+    best, inside, normal = _primitive_hits(world, o2, d2)
+    _mesh_hits(world, o2, d2, best, inside, normal)
+    hit = np.isfinite(best) & (best <= max_range)
+    inside &= hit
+    normal[inside] = -d2[inside]
+    nn = np.linalg.norm(normal, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        normal = np.where(nn > 0, normal / nn, -d2)
+    flip = _dot(normal, d2) > 0
+    normal[flip] = -normal[flip]
+    dist = np.where(hit, best, _INF)
+    points = np.where(hit[..., None], o2 + np.where(hit, best, 0.0)[..., None] * d2, np.nan)
+    normal[~hit] = np.nan
+    shape = batch + (n_rays,)
+    return RayHits(dist.reshape(shape), points.reshape(shape + (3,)), normal.reshape(shape + (3,)), hit.reshape(shape))
+
+
+def _checked_rays(world: CollisionWorld, origins: Array, directions: Array, max_range: float) -> tuple[tuple[int, ...], Array, Array, float]:
+    """The batch shape, origins and unit directions (broadcast to the origins' shape) and the
+    range, checked."""
     if world.dim != 3:
         raise ValueError(f"ray casting needs a 3D world, got dim={world.dim}")
     batch = tuple(world.batch_shape)
@@ -438,11 +466,13 @@ def cast_rays(world: CollisionWorld, origins: Array, directions: Array, max_rang
     max_range = float(max_range)
     if not max_range >= 0:
         raise ValueError("max_range must be >= 0")
-    d = d / norm
-    nb = int(np.prod(batch, dtype=np.int64))
-    n_rays = o.shape[-2]
-    o2, d2 = o.reshape(nb, n_rays, 3), d.reshape(nb, n_rays, 3)
+    return batch, o, d / norm, max_range
 
+
+def _primitive_hits(world: CollisionWorld, o2: Array, d2: Array) -> tuple[Array, NDArray[np.bool_], Array]:
+    """Nearest entry of rays ``(B, R, 3)`` into the primitive obstacles: distance (inf on a
+    miss), whether the ray starts inside, and the normal there (nan when unknown)."""
+    nb, n_rays = o2.shape[:2]
     best = np.full((nb, n_rays), _INF)
     inside = np.zeros((nb, n_rays), bool)
     normal = np.full((nb, n_rays, 3), np.nan)
@@ -487,9 +517,13 @@ def cast_rays(world: CollisionWorld, origins: Array, directions: Array, max_rang
             bi, ri = np.nonzero(sel)
             p = o2[bi, ri] + best[bi, ri, None] * d2[bi, ri]
             normal[bi, ri] = _normals(name, groups[name][0], bi, kbest[bi, ri], pbest[bi, ri], p)
+    return best, inside, normal
 
-    # meshes: one first-hit query per scene over all of its meshes
-    for b in range(nb):
+
+def _mesh_hits(world: CollisionWorld, o2: Array, d2: Array, best: Array, inside: NDArray[np.bool_], normal: Array) -> None:
+    """Bring ``best``, ``inside`` and ``normal`` (from the primitives) up to date with the
+    meshes: one first-hit query per scene over all of its meshes."""
+    for b in range(o2.shape[0]):
         meshes = [m for m in (world.meshes[b] if b < len(world.meshes) else []) if len(m.faces)]
         todo = np.flatnonzero(best[b] > 0.0)
         if not meshes or not len(todo):
@@ -502,20 +536,6 @@ def cast_rays(world: CollisionWorld, origins: Array, directions: Array, max_rang
         best[b, r_idx] = t
         inside[b, r_idx] = ins
         normal[b, r_idx] = n
-
-    hit = np.isfinite(best) & (best <= max_range)
-    inside &= hit
-    normal[inside] = -d2[inside]
-    nn = np.linalg.norm(normal, axis=-1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        normal = np.where(nn > 0, normal / nn, -d2)
-    flip = _dot(normal, d2) > 0
-    normal[flip] = -normal[flip]
-    dist = np.where(hit, best, _INF)
-    points = np.where(hit[..., None], o2 + np.where(hit, best, 0.0)[..., None] * d2, np.nan)
-    normal[~hit] = np.nan
-    shape = batch + (n_rays,)
-    return RayHits(dist.reshape(shape), points.reshape(shape + (3,)), normal.reshape(shape + (3,)), hit.reshape(shape))
 
 
 __all__ = ["RayHits", "cast_rays"]

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Union
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,7 +29,7 @@ class Box:
 
     center: Array
     size: Array
-    rotation: Array = field(default=None)  # type: ignore[assignment]
+    rotation: Array = field(default=None)  # type: ignore[arg-type]  # (set in __post_init__)
 
     def __post_init__(self) -> None:
         c = _vec(self.center)
@@ -91,7 +90,7 @@ class _AxialSolid:
     center: Array
     radius: float
     length: float
-    rotation: Array = field(default=None)  # type: ignore[assignment]
+    rotation: Array = field(default=None)  # type: ignore[arg-type]  # (set in __post_init__)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "center", _vec(self.center, 3))
@@ -162,4 +161,4 @@ class PointCloud:
         return int(self.points.shape[1])
 
 
-Shape = Union[Box, Sphere, Capsule, Cylinder, Cone, Mesh, PointCloud]
+Shape = Box | Sphere | Capsule | Cylinder | Cone | Mesh | PointCloud

@@ -19,13 +19,13 @@ import torch
 
 from ..envs.core import EnvConfig
 from ..models.actor_critic import Actor, NetConfig
+from ..models.checkpoint import save_checkpoint, to_dict
 from ..models.encoders import EncoderConfig
 from ..models.inputs import goal_input, obs_input
 from ..observers import make_observer
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Problem
-from .checkpoint import save_checkpoint, to_dict
 
 
 @dataclass
@@ -214,7 +214,7 @@ def observe_demos(demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Gen
     out = []
     for c in range(0, len(demos), chunk):
         sl = slice(c, c + chunk)
-        obs = make_observer(env.observation, robot, **kwargs)
+        obs = make_observer(env.observation or ("surface-normals" if robot.dim == 2 else "global"), robot, **kwargs)
         obs.bind([demos.problems[j].scene for j in demos.scene[sl]])
         out.append(obs.observe(demos.q[sl], rng))
     return np.concatenate(out)
@@ -222,22 +222,28 @@ def observe_demos(demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Gen
 
 @dataclass(frozen=True)
 class BCConfig:
+    """A behavioural-cloning run (saved with its checkpoint)."""
+
     env: str = "narrow2d"
     #: ``sphere3d`` or ``sshape`` in the 3D scenes; ``None`` takes the scenario's default
     robot: str | None = None
     observation: str = "surface-normals"
     n_points: int = 64
-    n_problems: int = 2000
-    epochs: int = 30
+    #: demonstration problems planned by Bi-RRT
+    n_problems: int = field(default=2000, metadata={"min": 1})
+    #: passes over the demonstrations
+    epochs: int = field(default=30, metadata={"min": 1})
+    #: Adam step size
     lr: float = 1e-3
-    batch_size: int = 256
+    #: demonstration steps per gradient step
+    batch_size: int = field(default=256, metadata={"min": 1})
     seed: int = 0
     device: str = "cpu"
     #: draw new observation subsets every this many epochs (0: never)
     refresh_every: int = 5
     net: NetConfig = field(default_factory=lambda: NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True))
-    #: workers planning the demonstrations (Ray when installed, else processes)
-    workers: int = 1
+    #: workers planning the demonstrations (Ray when installed, else processes); the demonstrations equal a serial run's
+    workers: int = field(default=1, metadata={"min": 1})
     #: a Ray cluster to plan the demonstrations on
     address: str | None = None
     #: a file of demonstrations: loaded if it exists, written after planning otherwise
@@ -268,7 +274,14 @@ def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: D
     losses = fit_actor(actor, opt, demos, robot, env, cfg.epochs, cfg.batch_size, rng, cfg.refresh_every, progress)
     payload = policy_payload(cfg, robot.name, obs_shape, actor, scenario.horizon)
     save_checkpoint(run_dir / "bc.pt", {**payload, "bc_config": to_dict(cfg), "demo_steps": len(demos)})
-    return {"checkpoint": str(run_dir / "bc.pt"), "demo_steps": len(demos), "demo_problems": len(demos.problems), "demo_time_s": t_demos, "train_time_s": time.perf_counter() - t0 - t_demos, "final_loss": losses[-1] if losses else float("nan")}
+    return {
+        "checkpoint": str(run_dir / "bc.pt"),
+        "demo_steps": len(demos),
+        "demo_problems": len(demos.problems),
+        "demo_time_s": t_demos,
+        "train_time_s": time.perf_counter() - t0 - t_demos,
+        "final_loss": losses[-1] if losses else float("nan"),
+    }
 
 
 def policy_payload(cfg: BCConfig, robot: str, obs_shape: tuple[int, ...], actor: Actor, horizon: int) -> dict[str, Any]:

@@ -24,11 +24,13 @@ import torch
 
 from ..envs.core import EnvConfig
 from ..models.actor_critic import Actor
+from ..models.checkpoint import load_checkpoint, save_checkpoint, to_dict
 from ..models.policy import Policy
 from ..scenes.scenarios import Scenario, make_scenario
 from .bc import (
     BCConfig,
     DemoJob,
+    Demos,
     demo_pool,
     demos_from_paths,
     fit_actor,
@@ -39,7 +41,6 @@ from .bc import (
     policy_payload,
     save_demos,
 )
-from .checkpoint import load_checkpoint, save_checkpoint, to_dict
 
 
 @dataclass(frozen=True)
@@ -50,15 +51,15 @@ class DaggerConfig:
     #: rounds of roll out, label, refit
     rounds: int = 20
     #: fresh training problems the policy attempts per round
-    rollouts: int = 400
+    rollouts: int = field(default=400, metadata={"min": 1})
     #: visited states of each failed rollout that the expert labels (evenly spaced)
     labels_per_failure: int = 4
     #: passes over all demonstrations after each round
     epochs_per_round: float = 2.0
     #: validation problems (``val`` split) after each round
-    eval_episodes: int = 200
+    eval_episodes: int = field(default=200, metadata={"min": 1})
     #: Bi-RRT node budget of the expert
-    max_nodes: int = 20000
+    max_nodes: int = field(default=20000, metadata={"min": 1})
 
 
 def _rollout_index(seed: int, rnd: int, rollouts: int, i: int) -> int:
@@ -100,12 +101,63 @@ def _validate(policy: Policy, scenario: Scenario, env: EnvConfig, problems: list
     return float(np.mean([r.success for r in res])), float(np.mean([r.nodes for r in res]))
 
 
-def train_dagger(cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, init_actor: str | None = None, resume: str | Path | None = None) -> dict[str, Any]:
+def _resume(path: str | Path, device: str, actor: Actor, opt: torch.optim.Optimizer, rng: np.random.Generator) -> dict[str, Any]:
+    """Restore the actor, the optimiser and the random streams of a DAgger ``last.pt``;
+    returns its counters (``round``, ``best``, ...)."""
+    state = load_checkpoint(path, device)
+    actor.load_state_dict(state["actor"])
+    d = state["dagger"]
+    opt.load_state_dict(d["optimizer"])
+    rng.bit_generator.state = d["rng"]
+    torch.set_rng_state(d["torch_rng"])
+    return dict(d)
+
+
+def _first_demos(b: BCConfig, scenario: Scenario, demos_path: Path, progress: bool) -> Demos:
+    """The cloning demonstrations (from ``b.demos_file`` when it exists, else planned), also
+    written to the run's ``demos.npz``."""
+    source = b.demos_file if b.demos_file and Path(b.demos_file).exists() else None
+    demos = load_demos(source, scenario) if source else generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address)
+    save_demos(demos_path, scenario, demos, "train", b.seed)
+    return demos
+
+
+def _save(run_dir: Path, payload: dict[str, Any], counters: dict[str, Any], opt: torch.optim.Optimizer, rng: np.random.Generator, improved: bool) -> None:
+    """``last.pt`` with the state to resume from; ``best.pt`` when validation improved."""
+    state = {**counters, "optimizer": opt.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}
+    save_checkpoint(run_dir / "last.pt", {**payload, "dagger": state})
+    if improved:
+        save_checkpoint(run_dir / "best.pt", payload)
+
+
+def _roll_out_and_label(
+    cfg: DaggerConfig, scenario: Scenario, policy: Policy, env: EnvConfig, rnd: int, pool: Any, progress: bool
+) -> tuple[list[Any], list[Any]]:
+    """Round ``rnd``'s rollouts of the policy on fresh training problems, and the expert's
+    paths from states of the failed ones."""
+    from ..planners.policy import rollout_batch
+
+    b = cfg.bc
+    probs = [scenario.problem("train", _rollout_index(b.seed, rnd, cfg.rollouts, i), seed=b.seed) for i in range(cfg.rollouts)]
+    results = rollout_batch(policy, scenario.robot, env, probs, scenario.horizon, seed=b.seed * 1000 + rnd)
+    jobs = _label_jobs(cfg, scenario, rnd, results)
+    return results, plan_demos(jobs, pool, progress, desc=f"round {rnd + 1}: expert labels")
+
+
+def _print_round(row: dict[str, Any], best: float) -> None:
+    print(
+        f"round {row['round']}: rollouts {row['rollout_success']:.3f}, {row['labels']} expert paths, {row['demo_steps']} steps; "
+        f"val success {row['val_success']:.3f} (best {best:.3f}), {row['wall_time_s']:.0f} s",
+        flush=True,
+    )
+
+
+def train_dagger(
+    cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, init_actor: str | None = None, resume: str | Path | None = None
+) -> dict[str, Any]:
     """Behavioural cloning (from ``init_actor`` if given, else fitted here), then
     ``cfg.rounds`` DAgger rounds; checkpoints ``best.pt`` and ``last.pt`` (resumable) and
     ``metrics.csv`` in ``run_dir``, the aggregated demonstrations in ``demos.npz``."""
-    from ..planners.policy import rollout_batch
-
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     b = cfg.bc
@@ -120,19 +172,12 @@ def train_dagger(cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, 
     demos_path = run_dir / "demos.npz"
     start_round, best, best_nodes, wall_before, env_steps = 0, -1.0, float("inf"), 0.0, 0
     if resume is not None:
-        state = load_checkpoint(resume, b.device)
-        actor.load_state_dict(state["actor"])
-        d = state["dagger"]
-        opt.load_state_dict(d["optimizer"])
-        rng.bit_generator.state = d["rng"]
-        torch.set_rng_state(d["torch_rng"])
+        d = _resume(resume, b.device, actor, opt, rng)
         start_round, best, best_nodes, wall_before = int(d["round"]), float(d["best"]), float(d["best_nodes"]), float(d["wall_time_s"])
         env_steps = int(d["env_steps"])
         demos = load_demos(demos_path, scenario)
     else:
-        source = b.demos_file if b.demos_file and Path(b.demos_file).exists() else None
-        demos = load_demos(source, scenario) if source else generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address)
-        save_demos(demos_path, scenario, demos, "train", b.seed)
+        demos = _first_demos(b, scenario, demos_path, progress)
         if init_actor:
             actor.load_state_dict(load_checkpoint(init_actor, b.device)["actor"])
         else:
@@ -144,12 +189,9 @@ def train_dagger(cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, 
     t0 = time.perf_counter()
     try:
         for rnd in range(start_round, cfg.rounds):
-            probs = [scenario.problem("train", _rollout_index(b.seed, rnd, cfg.rollouts, i), seed=b.seed) for i in range(cfg.rollouts)]
             actor.eval()
-            results = rollout_batch(policy, robot, env, probs, scenario.horizon, seed=b.seed * 1000 + rnd)
+            results, new = _roll_out_and_label(cfg, scenario, policy, env, rnd, pool, progress)
             env_steps += sum(r.nodes for r in results)
-            jobs = _label_jobs(cfg, scenario, rnd, results)
-            new = plan_demos(jobs, pool, progress, desc=f"round {rnd + 1}: expert labels")
             demos = demos_from_paths(scenario, "train", b.seed, demos.paths + new)
             save_demos(demos_path, scenario, demos, "train", b.seed)
             actor.train()
@@ -160,32 +202,30 @@ def train_dagger(cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, 
             improved = val > best or (val == best and nodes < best_nodes)
             if improved:
                 best, best_nodes = val, nodes
-            row = {"round": rnd + 1, "wall_time_s": wall, "rollout_success": float(np.mean([r.success for r in results])), "labels": len(new), "demo_steps": len(demos), "val_success": val, "val_nodes": nodes, "loss": losses[-1], "rollout_env_steps": env_steps}
+            row = {
+                "round": rnd + 1,
+                "wall_time_s": wall,
+                "rollout_success": float(np.mean([r.success for r in results])),
+                "labels": len(new),
+                "demo_steps": len(demos),
+                "val_success": val,
+                "val_nodes": nodes,
+                "loss": losses[-1],
+                "rollout_env_steps": env_steps,
+            }
             log.write(row)
-            payload = {**policy_payload(b, robot.name, obs_shape, actor, scenario.horizon), "dagger_config": to_dict(cfg), "val_success": val, "wall_time_s": wall, "round": rnd + 1}
-            state = {"round": rnd + 1, "best": best, "best_nodes": best_nodes, "wall_time_s": wall, "env_steps": env_steps, "optimizer": opt.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}
-            save_checkpoint(run_dir / "last.pt", {**payload, "dagger": state})
-            if improved:
-                save_checkpoint(run_dir / "best.pt", payload)
+            payload = {
+                **policy_payload(b, robot.name, obs_shape, actor, scenario.horizon),
+                "dagger_config": to_dict(cfg),
+                "val_success": val,
+                "wall_time_s": wall,
+                "round": rnd + 1,
+            }
+            counters = {"round": rnd + 1, "best": best, "best_nodes": best_nodes, "wall_time_s": wall, "env_steps": env_steps}
+            _save(run_dir, payload, counters, opt, rng, improved)
             if progress:
-                print(f"round {rnd + 1}: rollouts {row['rollout_success']:.3f}, {len(new)} expert paths, {len(demos)} steps; val success {val:.3f} (best {best:.3f}), {wall:.0f} s", flush=True)
+                _print_round(row, best)
     finally:
         if pool is not None:
             pool.shutdown(cancel_futures=True)
     return {"run_dir": str(run_dir), "best_success": best, "demo_steps": len(demos), "wall_time_s": wall_before + time.perf_counter() - t0}
-
-
-def config_from_dict(d: dict[str, Any], rounds: int | None = None) -> DaggerConfig:
-    """The configuration saved in a DAgger checkpoint (``rounds`` replaced if given)."""
-    from ..models.actor_critic import NetConfig
-    from ..models.encoders import EncoderConfig
-
-    d = dict(d)
-    bc = dict(d["bc"])
-    net = dict(bc["net"])
-    net["encoder"] = EncoderConfig(**net["encoder"])
-    bc["net"] = NetConfig(**net)
-    d["bc"] = BCConfig(**bc)
-    if rounds:
-        d["rounds"] = rounds
-    return DaggerConfig(**d)

@@ -1,7 +1,9 @@
 """Episode-aware replay buffer with hindsight goal relabelling ("future" strategy).
 
 Transitions are stored whole episodes at a time (an episode enters the buffer when it
-ends), so every transition knows where its episode ends. A relabelled sample replaces the
+ends), so every transition knows where its episode ends. With :meth:`EpisodeReplay.track`
+the buffer also stages the episodes ``E`` environments are in: :meth:`add_steps` takes one
+transition per environment and adds each episode as it ends. A relabelled sample replaces the
 goal with the configuration reached at a later step of the same episode; its reward is
 recomputed from the stored action norm and collision flag, exactly as the environment
 would have computed it (see ``BatchedCore.reward``).
@@ -30,6 +32,38 @@ class Batch:
     relabelled: NDArray[np.bool_]
 
 
+#: the stored fields of a transition, in :meth:`EpisodeReplay.add_episode`'s order
+_FIELDS = ("obs", "next_obs", "q", "q_next", "goal", "action", "action_norm", "collided")
+
+
+class EpisodeStaging:
+    """The running episodes of ``E`` environments: one transition per environment at a
+    time; each episode is handed out whole when it ends."""
+
+    def __init__(self, num_envs: int, horizon: int, obs_shape: tuple[int, ...], config_dim: int, action_dim: int, obs_dtype: type = np.float32) -> None:
+        e, h = int(num_envs), int(horizon)
+        self.arrays: dict[str, np.ndarray] = {
+            "obs": np.zeros((e, h) + tuple(obs_shape), obs_dtype),
+            "next_obs": np.zeros((e, h) + tuple(obs_shape), obs_dtype),
+            "q": np.zeros((e, h, config_dim)),
+            "q_next": np.zeros((e, h, config_dim)),
+            "goal": np.zeros((e, h, config_dim)),
+            "action": np.zeros((e, h, action_dim), np.float32),
+            "action_norm": np.zeros((e, h)),
+            "collided": np.zeros((e, h), bool),
+        }
+
+    def add(self, t: np.ndarray, done: np.ndarray, **transition: np.ndarray) -> list[tuple[np.ndarray, ...]]:
+        """One transition per environment, at step ``t[i]`` of its episode (the fields of
+        :meth:`EpisodeReplay.add_episode` as keywords); returns the episodes that are
+        ``done`` (views of the staging arrays, valid until the next call), in environment
+        order, as :meth:`EpisodeReplay.add_episode`'s arguments."""
+        rows = np.arange(len(t))
+        for k in _FIELDS:
+            self.arrays[k][rows, t] = transition[k]
+        return [tuple(self.arrays[k][i, : int(t[i]) + 1] for k in _FIELDS) for i in np.flatnonzero(done)]
+
+
 class EpisodeReplay:
     """A ring buffer of ``capacity`` transitions.
 
@@ -40,8 +74,8 @@ class EpisodeReplay:
     def __init__(self, capacity: int, obs_shape: tuple[int, ...], config_dim: int, action_dim: int, obs_dtype: type = np.float32) -> None:
         self.capacity = int(capacity)
         c = self.capacity
-        self.obs = np.zeros((c,) + tuple(obs_shape), obs_dtype)
-        self.next_obs = np.zeros((c,) + tuple(obs_shape), obs_dtype)
+        self.obs: np.ndarray = np.zeros((c,) + tuple(obs_shape), obs_dtype)
+        self.next_obs: np.ndarray = np.zeros((c,) + tuple(obs_shape), obs_dtype)
         self.q = np.zeros((c, config_dim))
         self.q_next = np.zeros((c, config_dim))
         self.goal = np.zeros((c, config_dim))
@@ -54,11 +88,35 @@ class EpisodeReplay:
         self.pos = 0
         self.size = 0
         self.n_episodes = 0
+        self._staging: EpisodeStaging | None = None
+
+    def track(self, num_envs: int, horizon: int) -> None:
+        """Stage the running episodes of ``num_envs`` environments of at most ``horizon`` steps."""
+        self._staging = EpisodeStaging(num_envs, horizon, self.obs.shape[1:], self.q.shape[1], self.action.shape[1], self.obs.dtype.type)
+
+    def add_steps(self, t: np.ndarray, done: np.ndarray, **transition: np.ndarray) -> None:
+        """One transition per tracked environment, at step ``t[i]`` of its episode (the
+        fields of :meth:`add_episode` as keywords); the episodes that are ``done`` enter
+        the buffer, in environment order."""
+        if self._staging is None:
+            raise RuntimeError("call track(num_envs, horizon) first")
+        for episode in self._staging.add(t, done, **transition):
+            self.add_episode(*episode)
 
     def __len__(self) -> int:
         return self.size
 
-    def add_episode(self, obs: np.ndarray, next_obs: np.ndarray, q: np.ndarray, q_next: np.ndarray, goal: np.ndarray, action: np.ndarray, action_norm: np.ndarray, collided: np.ndarray) -> None:
+    def add_episode(
+        self,
+        obs: np.ndarray,
+        next_obs: np.ndarray,
+        q: np.ndarray,
+        q_next: np.ndarray,
+        goal: np.ndarray,
+        action: np.ndarray,
+        action_norm: np.ndarray,
+        collided: np.ndarray,
+    ) -> None:
         """Store one finished episode of ``T`` transitions (arrays with leading ``T``)."""
         t = len(q)
         if t == 0:

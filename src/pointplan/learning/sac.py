@@ -8,15 +8,15 @@ the critics, the actor and the temperature.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
 
-from ..envs.core import EnvConfig
-from ..models.actor_critic import NetConfig, build_networks
+from ..envs.core import EnvConfig, goal_reached, step_reward
+from ..models.actor_critic import Actor, NetConfig, build_networks
 from ..models.inputs import goal_input, obs_input
 from ..robots.base import Robot
 from .replay import Batch
@@ -26,15 +26,22 @@ from .replay import Batch
 class SACConfig:
     """SAC hyperparameters; defaults are the paper's."""
 
+    #: Adam step size of actor, critics and temperature
     lr: float = 3e-4
-    batch_size: int = 256
+    #: transitions per gradient step
+    batch_size: int = field(default=256, metadata={"min": 1})
+    #: discount factor
     gamma: float = 0.99
+    #: rate of the target critics' running average
     tau: float = 5e-3
     #: target entropy per action dimension (the target is this times dim(A))
     target_entropy_scale: float = -1.0
+    #: initial entropy temperature
     init_alpha: float = 1.0
+    #: share of sampled transitions whose goal is relabelled (hindsight)
     her_ratio: float = 0.8
-    buffer_size: int = 1_000_000
+    #: replay buffer capacity in transitions
+    buffer_size: int = field(default=1_000_000, metadata={"min": 1})
     #: critic-only updates before the actor and temperature start to move (useful when the
     #: actor starts from behavioural cloning and the critic from scratch)
     actor_delay: int = 0
@@ -46,9 +53,8 @@ class SACConfig:
 
 def batch_rewards(robot: Robot, env: EnvConfig, b: Batch) -> tuple[np.ndarray, np.ndarray]:
     """Rewards and success flags of (possibly relabelled) transitions, as the env gives them."""
-    success = (robot.distance(b.q_next, b.goal) < env.goal_tolerance) & ~b.collided
-    reward = -b.action_norm + np.where(b.collided, env.reward_collision, env.reward_free) + env.reward_success * success
-    return reward, success
+    success = goal_reached(robot, env, b.q_next, b.goal, b.collided)
+    return step_reward(env, b.action_norm, b.collided, success), success
 
 
 class SAC:
@@ -72,7 +78,7 @@ class SAC:
         #: the running average of the actor (weights and encoder), or None when off
         self.actor_avg = self._new_average() if cfg.policy_avg > 0 else None
 
-    def _new_average(self) -> nn.Module:
+    def _new_average(self) -> Actor:
         avg = copy.deepcopy(self.actor).requires_grad_(False).eval()
         avg.detach_encoder = False  # its encoder is its own copy
         # (average, actor) tensor pairs, found once: state_dict tensors share storage with the
@@ -83,7 +89,7 @@ class SAC:
         return avg
 
     @property
-    def policy_actor(self) -> nn.Module:
+    def policy_actor(self) -> Actor:
         """The actor that evaluation and checkpoints use: the averaged one when kept."""
         return self.actor_avg if self.actor_avg is not None else self.actor
 
@@ -116,13 +122,13 @@ class SAC:
         not_done = self.tensor(~success)  # bootstrapping stops only on success
         alpha = self.log_alpha.exp().detach()
 
-        shared = self.critic.shared is not None
+        encoder = self.critic.shared
         with torch.no_grad():
-            h_next = self.critic.shared(next_obs) if shared else None
+            h_next = encoder(next_obs) if encoder is not None else None
             a2, logp2 = self.actor.sample(next_obs, g_next, h_next)
             q1t, q2t = self.critic_target(next_obs, g_next, a2)
             target = r + self.cfg.gamma * not_done * (torch.min(q1t, q2t) - alpha * logp2)
-        h = self.critic.shared(obs) if shared else None
+        h = encoder(obs) if encoder is not None else None
         q1, q2 = self.critic(obs, g, a, h)
         critic_loss = nn.functional.mse_loss(q1, target) + nn.functional.mse_loss(q2, target)
         self.critic_opt.zero_grad(set_to_none=True)

@@ -10,21 +10,25 @@ are kept in the run directory with ``metrics.csv`` and TensorBoard logs.
 from __future__ import annotations
 
 import csv
+import signal
+import sys
+import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
+from ..config import from_dict
 from ..envs.core import BatchedCore, EnvConfig
 from ..models.actor_critic import NetConfig
+from ..models.checkpoint import CheckpointError, load_checkpoint, save_checkpoint, to_dict
 from ..models.encoders import EncoderConfig
 from ..scenes.scenarios import make_scenario
 from ..scenes.scene import Problem
-from .checkpoint import load_checkpoint, save_checkpoint, to_dict
 from .curriculum import EpisodeSource, FailurePool
 from .replay import EpisodeReplay
 from .sac import SAC, SACConfig
@@ -40,18 +44,22 @@ class TrainConfig:
     observation: str = "surface-normals"
     n_points: int = 64
     #: environments stepping together
-    num_envs: int = 16
+    num_envs: int = field(default=16, metadata={"min": 1})
     #: environment transitions to collect
-    total_steps: int = 200_000
+    total_steps: int = field(default=200_000, metadata={"min": 1})
     #: transitions of uniform random actions before the policy acts
     warmup_steps: int = 1_000
     #: gradient steps per collected transition (the paper: 1)
     updates_per_step: float = 0.25
-    eval_every: int = 10_000
-    eval_episodes: int = 100
+    #: environment transitions between two validations (and checkpoints)
+    eval_every: int = field(default=10_000, metadata={"min": 1})
+    #: validation problems (the ``val`` split)
+    eval_episodes: int = field(default=100, metadata={"min": 1})
     #: stop early once the validation success reaches this
     target_success: float = 1.01
+    #: seeds the problems, the networks and the validation set
     seed: int = 0
+    #: ``cpu`` or ``cuda``
     device: str = "cpu"
     net: NetConfig = field(default_factory=lambda: NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True))
     sac: SACConfig = field(default_factory=SACConfig)
@@ -63,18 +71,10 @@ class TrainConfig:
     #: at every validation, the deterministic policy also attempts this many fresh training
     #: problems; the ones it fails enter the retry pool
     mine_episodes: int = 0
-    #: problems kept for retrying, and retries per problem after its last failure
-    pool_size: int = 2000
+    #: problems kept for retrying
+    pool_size: int = field(default=2000, metadata={"min": 1})
+    #: retries of a problem after its last failure
     pool_retries: int = 4
-
-
-def config_from_dict(d: dict[str, Any]) -> TrainConfig:
-    d = dict(d)
-    net = dict(d["net"])
-    net["encoder"] = EncoderConfig(**net["encoder"])
-    d["net"] = NetConfig(**net)
-    d["sac"] = SACConfig(**d["sac"])
-    return TrainConfig(**d)
 
 
 @dataclass
@@ -84,7 +84,8 @@ class TrainResult:
     steps: int
     wall_time_s: float
     history: list[dict[str, float]]
-    #: stopped by Ctrl-C (training on Ray workers), after a last validation and checkpoint
+    #: stopped by Ctrl-C: in one process after saving the trainer state at the current step
+    #: to ``last.pt``; with Ray workers after a last validation and checkpoint
     interrupted: bool = False
 
 
@@ -168,11 +169,287 @@ def train(
         remote = RayRollouts(cfg, workers, address, sync_every or SYNC_EVERY)
     try:
         res = _train(cfg, run_dir, progress, resume, on_eval, remote)
-        res.interrupted = bool(remote is not None and remote.interrupted)
+        res.interrupted = res.interrupted or bool(remote is not None and remote.interrupted)
         return res
     finally:
         if remote is not None:
             remote.close()
+
+
+@dataclass
+class _Run:
+    """What the training loop reads and updates: the pieces of the run and its counters."""
+
+    cfg: TrainConfig
+    run_dir: Path
+    scenario: Any
+    core: BatchedCore
+    env_cfg: EnvConfig
+    obs_shape: tuple[int, ...]
+    rng: np.random.Generator
+    agent: SAC
+    steps: int = 0
+    best: float = -1.0
+    best_nodes: float = float("inf")
+    elapsed_before: float = 0.0
+    buffer: Any = None
+    val_problems: list[Problem] = field(default_factory=list)
+    logger: Any = None
+    pool: FailurePool | None = None
+    source: Any = None
+    obs: Any = None
+    recent: list[float] = field(default_factory=list)
+    credit: float = 0.0
+    last_losses: dict[str, float] = field(default_factory=dict)
+    history: list[dict[str, float]] = field(default_factory=list)
+    t_start: float = 0.0
+    next_eval: int = 0
+
+    @property
+    def wall(self) -> float:
+        return self.elapsed_before + time.perf_counter() - self.t_start
+
+    @property
+    def warming_up(self) -> bool:
+        return self.steps < self.cfg.warmup_steps and self.cfg.init_actor is None
+
+
+def _start(cfg: TrainConfig, run_dir: Path, resume: str | Path | None, remote: Any) -> _Run:
+    """Build the environments, the agent and the buffer; restore ``resume``'s trainer state."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    scenario = make_scenario(cfg.env, robot=cfg.robot)
+    env_cfg = EnvConfig(observation=cfg.observation, n_points=cfg.n_points, split="train")
+    core = BatchedCore(scenario, cfg.num_envs, env_cfg)
+    obs_shape = tuple(core.observer.space.shape)
+    rng = np.random.default_rng(cfg.seed)
+    torch.manual_seed(cfg.seed)
+    agent = SAC(scenario.robot, env_cfg, obs_shape, cfg.net, cfg.sac, cfg.device)
+    run = _Run(cfg, run_dir, scenario, core, env_cfg, obs_shape, rng, agent)
+    if cfg.init_actor and resume is None:  # a resumed run has its own actor already
+        agent.actor.load_state_dict(load_checkpoint(cfg.init_actor, cfg.device)["actor"])
+    if resume is not None:
+        _resume(run, resume)
+        if run.steps >= cfg.total_steps:
+            raise ValueError(f"{resume}: the run has done {run.steps} steps already; set total_steps above that to continue it")
+    robot = scenario.robot
+    run.buffer = EpisodeReplay(int(min(cfg.sac.buffer_size, max(cfg.total_steps, 10_000))), obs_shape, robot.config_dim, robot.twist_dim)
+    run.buffer.track(cfg.num_envs, core.horizon)
+    run.val_problems = scenario.problems("val", cfg.eval_episodes, seed=cfg.seed)
+    run.logger = _Logger(run_dir)
+    if cfg.retry_failures > 0 or cfg.mine_episodes > 0:
+        run.pool = FailurePool(cfg.pool_size, cfg.pool_retries)
+    run.source = EpisodeSource(core, run.pool, cfg.retry_failures)
+    if remote is None:  # (rollout workers start their own environments)
+        run.source.reset(range(cfg.num_envs), rng)
+        run.obs = core.observe(rng)["observation"]
+    run.t_start = time.perf_counter()
+    run.next_eval = (run.steps // cfg.eval_every + 1) * cfg.eval_every
+    return run
+
+
+def _resume(run: _Run, path: str | Path) -> None:
+    """Continue from the trainer state in ``path`` (a run's ``last.pt``)."""
+    cfg, agent = run.cfg, run.agent
+    state = load_checkpoint(path, cfg.device)
+    if "trainer" not in state:
+        raise CheckpointError(f"{path}: holds a policy but no trainer state (best.pt and bc.pt do not); resume from the run's last.pt")
+    trainer = state["trainer"]
+    agent.load_state_dict(trainer["agent"])
+    run.steps = int(trainer["steps"])
+    run.best = float(trainer["best"])
+    run.best_nodes = float(trainer.get("best_nodes", float("inf")))
+    run.elapsed_before = float(trainer["wall_time_s"])
+    run.rng.bit_generator.state = trainer["rng"]
+    torch.set_rng_state(trainer["torch_rng"])
+    before = from_dict(TrainConfig, state["train_config"])
+    if before.sac.lr != cfg.sac.lr:
+        agent.set_lr(cfg.sac.lr)
+    if (before.eval_episodes, before.seed) != (cfg.eval_episodes, cfg.seed):
+        run.best, run.best_nodes = -1.0, float("inf")  # another validation set: not comparable
+
+
+def _collect(run: _Run) -> int:
+    """One step of every environment; finished episodes enter the buffer and restart."""
+    core, rng, e = run.core, run.rng, run.cfg.num_envs
+    q, goal = core.q.copy(), core.goal.copy()
+    if run.warming_up:
+        actions = rng.uniform(-1.0, 1.0, (e, core.robot.twist_dim)).astype(np.float32)
+    else:
+        actions = run.agent.act(run.obs, q, goal)
+    t = core.t.copy()
+    _, term, trunc, info = core.step(actions)
+    next_obs = core.observe(rng)["observation"]
+    done = term | trunc
+    run.buffer.add_steps(
+        t, done, obs=run.obs, next_obs=next_obs, q=q, q_next=core.q, goal=goal, action=actions, action_norm=info["action_norm"], collided=info["collided"]
+    )
+    run.steps += e
+    if done.any():
+        for i in np.flatnonzero(done):
+            if not run.source.is_retry(i):  # the success rate of fresh problems only
+                run.recent.append(float(term[i]))
+            run.source.ended(i, bool(term[i]))
+        run.recent = run.recent[-200:]
+        run.source.reset(np.flatnonzero(done).tolist(), rng)
+        fresh = core.observe(rng)["observation"]
+        next_obs = np.where(done.reshape((-1,) + (1,) * len(run.obs_shape)), fresh, next_obs)
+    run.obs = next_obs
+    return e
+
+
+def _collect_remote(run: _Run, remote: Any) -> int:
+    """Episodes from the Ray rollout workers (which step the environments)."""
+    remote.sync(run.agent.actor, run.agent.updates)
+    episodes, succ, collected = remote.next_chunk(random_actions=run.warming_up)
+    for episode in episodes:
+        run.buffer.add_episode(*episode)
+    run.recent = (run.recent + succ)[-200:]
+    run.steps += collected
+    return int(collected)
+
+
+def _learn(run: _Run, collected: int) -> None:
+    """``updates_per_step`` gradient steps per collected transition (after the warm-up)."""
+    cfg = run.cfg
+    if run.steps >= cfg.warmup_steps and len(run.buffer) >= cfg.sac.batch_size:
+        run.credit += collected * cfg.updates_per_step
+        while run.credit >= 1.0:
+            run.last_losses = run.agent.update(run.buffer.sample(cfg.sac.batch_size, run.rng, cfg.sac.her_ratio))
+            run.credit -= 1.0
+
+
+def _rollouts(run: _Run, problems: list[Problem], averaged: bool, seed: int) -> list[Any]:
+    """The deterministic policy on ``problems``."""
+    from ..planners.policy import rollout_batch
+
+    agent = run.agent
+    return rollout_batch(
+        lambda o, q, g: agent.act(o, q, g, deterministic=True, averaged=averaged), run.scenario.robot, run.env_cfg, problems, run.scenario.horizon, seed=seed
+    )
+
+
+def _mine_failures(run: _Run) -> dict[str, float]:
+    """The deterministic policy on fresh training problems; its failures enter the retry pool."""
+    cfg, pool, scenario = run.cfg, run.pool, run.scenario
+    assert pool is not None
+    raw: dict[str, float] = {}
+    if cfg.mine_episodes > 0:
+        mined = []
+        for _ in range(cfg.mine_episodes):
+            scene = scenario.scene("train", int(run.rng.integers(0, 2**31 - 1)))
+            mined.append(Problem(scene, *scenario.sample_problem(scene, run.rng)))
+        results = _rollouts(run, mined, averaged=True, seed=run.steps)
+        for p, r in zip(mined, results, strict=True):
+            if not r.success:
+                pool.failed(p)
+        raw["mine_success"] = float(np.mean([r.success for r in results]))
+    raw["pool_size"] = float(len(pool))
+    raw["retry_share"] = run.source.retry_share
+    return raw
+
+
+def _validate(run: _Run) -> tuple[dict[str, float], float]:
+    """Validation (and failure mining): the metrics row and the mean steps of all episodes."""
+    agent = run.agent
+    agent.actor.eval()
+    res = _rollouts(run, run.val_problems, averaged=True, seed=run.cfg.seed)
+    raw: dict[str, float] = {}
+    if agent.actor_avg is not None:  # the current actor too, for comparison
+        raw["val_success_current"] = float(np.mean([r.success for r in _rollouts(run, run.val_problems, averaged=False, seed=run.cfg.seed)]))
+    if run.pool is not None:
+        raw.update(_mine_failures(run))
+    agent.actor.train()
+    solved = [r.nodes for r in res if r.success]
+    row = {
+        "env_steps": float(run.steps),
+        "updates": float(agent.updates),
+        "wall_time_s": run.wall,
+        "val_success": float(np.mean([r.success for r in res])),
+        "train_success": float(np.mean(run.recent)) if run.recent else 0.0,
+        "val_nodes": float(np.mean(solved)) if solved else 0.0,
+        **raw,
+        **{k: float(v) for k, v in run.last_losses.items()},
+    }
+    return row, float(np.mean([r.nodes for r in res]))
+
+
+def _trainer_state(run: _Run, wall: float, best: float, best_nodes: float) -> dict[str, Any]:
+    return {
+        "agent": run.agent.state_dict(),
+        "steps": run.steps,
+        "best": best,
+        "best_nodes": best_nodes,
+        "wall_time_s": wall,
+        "rng": run.rng.bit_generator.state,
+        "torch_rng": torch.get_rng_state(),
+    }
+
+
+def _save(run: _Run, row: dict[str, float], nodes_all: float) -> None:
+    """``last.pt`` with the trainer state; ``best.pt`` when validation improved (highest
+    success, then fewest steps)."""
+    val, wall = row["val_success"], row["wall_time_s"]
+    improved = val > run.best or (val == run.best and nodes_all < run.best_nodes)
+    state = _trainer_state(run, wall, max(run.best, val), nodes_all if improved else run.best_nodes)
+    extra = {"env_steps": run.steps, "val_success": val, "wall_time_s": wall, "horizon": run.core.horizon}
+    payload = _checkpoint_payload(run.cfg, run.agent, run.obs_shape, run.scenario.robot.name, extra)
+    save_checkpoint(run.run_dir / "last.pt", {**payload, "trainer": state})
+    if improved:
+        run.best, run.best_nodes = val, nodes_all
+        save_checkpoint(run.run_dir / "best.pt", payload)
+
+
+def _evaluate(run: _Run, on_eval: Callable[[dict[str, float]], None] | None, bar: Any) -> float:
+    """Validate, log and checkpoint; returns the validation success."""
+    row, nodes_all = _validate(run)
+    run.history.append(row)
+    run.logger.log(row)
+    if on_eval is not None:
+        on_eval(row)
+    _save(run, row, nodes_all)
+    if bar is not None:
+        bar.write(f"step {run.steps}: val success {row['val_success']:.3f} (best {run.best:.3f}), {row['wall_time_s']:.0f} s")
+    return row["val_success"]
+
+
+def _progress(run: _Run, bar: Any, collected: int) -> None:
+    if bar is not None:
+        bar.update(max(0, min(collected, bar.total - bar.n)))  # the last step may overshoot the total
+        if run.recent:
+            bar.set_postfix(train_success=f"{np.mean(run.recent):.2f}", best_val=f"{max(run.best, 0):.3f}", updates=run.agent.updates)
+
+
+class _StopOnCtrlC:
+    """Ctrl-C (SIGINT) asks the loop to stop after the current step; a second one stops at once."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled and threading.current_thread() is threading.main_thread()
+        self.requested = False
+        self._old: Any = None
+
+    def __enter__(self) -> _StopOnCtrlC:
+        if self.enabled:
+            self._old = signal.signal(signal.SIGINT, self._on_sigint)
+        return self
+
+    def _on_sigint(self, signum: int, frame: Any) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __exit__(self, *exc: object) -> None:
+        if self.enabled:
+            signal.signal(signal.SIGINT, self._old)
+
+
+def _save_interrupted(run: _Run) -> None:
+    """``last.pt`` with the trainer state at the current step (no validation)."""
+    wall = run.wall
+    val = run.history[-1]["val_success"] if run.history else float("nan")
+    extra = {"env_steps": run.steps, "val_success": val, "wall_time_s": wall, "horizon": run.core.horizon}
+    payload = _checkpoint_payload(run.cfg, run.agent, run.obs_shape, run.scenario.robot.name, extra)
+    save_checkpoint(run.run_dir / "last.pt", {**payload, "trainer": _trainer_state(run, wall, run.best, run.best_nodes)})
+    print(f"\ninterrupted at step {run.steps}: trainer state saved to {run.run_dir / 'last.pt'} (continue with --resume)", file=sys.stderr)
 
 
 def _train(
@@ -183,181 +460,26 @@ def _train(
     on_eval: Callable[[dict[str, float]], None] | None,
     remote: Any,
 ) -> TrainResult:
-    from ..planners.policy import rollout_batch
-
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    scenario = make_scenario(cfg.env, robot=cfg.robot)
-    robot = scenario.robot
-    env_cfg = EnvConfig(observation=cfg.observation, n_points=cfg.n_points, split="train")
-    core = BatchedCore(scenario, cfg.num_envs, env_cfg)
-    obs_shape = tuple(core.observer.space.shape)
-    rng = np.random.default_rng(cfg.seed)
-    torch.manual_seed(cfg.seed)
-    agent = SAC(robot, env_cfg, obs_shape, cfg.net, cfg.sac, cfg.device)
-    steps, best, best_nodes, elapsed_before = 0, -1.0, float("inf"), 0.0
-    if cfg.init_actor and resume is None:  # a resumed run has its own actor already
-        init = load_checkpoint(cfg.init_actor, cfg.device)
-        agent.actor.load_state_dict(init["actor"])
-    if resume is not None:
-        state = load_checkpoint(resume, cfg.device)
-        agent.load_state_dict(state["trainer"]["agent"])
-        steps = int(state["trainer"]["steps"])
-        best = float(state["trainer"]["best"])
-        best_nodes = float(state["trainer"].get("best_nodes", float("inf")))
-        elapsed_before = float(state["trainer"]["wall_time_s"])
-        rng.bit_generator.state = state["trainer"]["rng"]
-        torch.set_rng_state(state["trainer"]["torch_rng"])
-        before = config_from_dict(state["train_config"])
-        if before.sac.lr != cfg.sac.lr:
-            agent.set_lr(cfg.sac.lr)
-        if (before.eval_episodes, before.seed) != (cfg.eval_episodes, cfg.seed):
-            best, best_nodes = -1.0, float("inf")  # another validation set: not comparable
-    capacity = int(min(cfg.sac.buffer_size, max(cfg.total_steps, 10_000)))
-    buffer = EpisodeReplay(capacity, obs_shape, robot.config_dim, robot.twist_dim)
-    val_problems = scenario.problems("val", cfg.eval_episodes, seed=cfg.seed)
-    logger = _Logger(run_dir)
-
-    e, h = cfg.num_envs, core.horizon
-    st = {
-        "obs": np.zeros((e, h) + obs_shape, np.float32),
-        "next_obs": np.zeros((e, h) + obs_shape, np.float32),
-        "q": np.zeros((e, h, robot.config_dim)),
-        "q_next": np.zeros((e, h, robot.config_dim)),
-        "goal": np.zeros((e, h, robot.config_dim)),
-        "action": np.zeros((e, h, robot.twist_dim), np.float32),
-        "action_norm": np.zeros((e, h)),
-        "collided": np.zeros((e, h), bool),
-    }
-    pool = FailurePool(cfg.pool_size, cfg.pool_retries) if (cfg.retry_failures > 0 or cfg.mine_episodes > 0) else None
-    source = EpisodeSource(core, pool, cfg.retry_failures)
-    obs: Any = None
-    if remote is None:  # (rollout workers start their own environments)
-        source.reset(range(e), rng)
-        obs = core.observe(rng)["observation"]
-    recent: list[float] = []
-    credit, last_losses = 0.0, {}
-    t_start = time.perf_counter()
-    next_eval = (steps // cfg.eval_every + 1) * cfg.eval_every
+    run = _start(cfg, Path(run_dir), resume, remote)
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=cfg.total_steps, initial=steps, unit="step", dynamic_ncols=True)
-    history: list[dict[str, float]] = []
-    rows = np.arange(e)
-    while steps < cfg.total_steps:
-        stop_now = remote is not None and remote.interrupted
-        if remote is not None:  # Ray rollout workers step the environments
-            remote.sync(agent.actor, agent.updates)
-            episodes, succ, collected = remote.next_chunk(random_actions=steps < cfg.warmup_steps and cfg.init_actor is None)
-            for episode in episodes:
-                buffer.add_episode(*episode)
-            recent = (recent + succ)[-200:]
-            steps += collected
-        else:
-            collected = e
-            q, goal = core.q.copy(), core.goal.copy()
-            if steps < cfg.warmup_steps and cfg.init_actor is None:
-                actions = rng.uniform(-1.0, 1.0, (e, robot.twist_dim)).astype(np.float32)
-            else:
-                actions = agent.act(obs, q, goal)
-            t_idx = core.t.copy()
-            _, term, trunc, info = core.step(actions)
-            next_obs = core.observe(rng)["observation"]
-            for k, v in (("obs", obs), ("next_obs", next_obs), ("q", q), ("q_next", core.q), ("goal", goal), ("action", actions), ("action_norm", info["action_norm"]), ("collided", info["collided"])):
-                st[k][rows, t_idx] = v
-            done = term | trunc
-            steps += e
-            if done.any():
-                for i in np.flatnonzero(done):
-                    n = int(t_idx[i]) + 1
-                    buffer.add_episode(*(st[k][i, :n] for k in ("obs", "next_obs", "q", "q_next", "goal", "action", "action_norm", "collided")))
-                    if not source.is_retry(i):  # the success rate of fresh problems only
-                        recent.append(float(term[i]))
-                    source.ended(i, bool(term[i]))
-                recent = recent[-200:]
-                source.reset(np.flatnonzero(done).tolist(), rng)
-                fresh = core.observe(rng)["observation"]
-                next_obs = np.where(done.reshape((-1,) + (1,) * len(obs_shape)), fresh, next_obs)
-            obs = next_obs
-        if steps >= cfg.warmup_steps and len(buffer) >= cfg.sac.batch_size:
-            credit += collected * cfg.updates_per_step
-            while credit >= 1.0:
-                last_losses = agent.update(buffer.sample(cfg.sac.batch_size, rng, cfg.sac.her_ratio))
-                credit -= 1.0
-        if bar is not None:
-            bar.update(collected)
-            if recent:
-                bar.set_postfix(train_success=f"{np.mean(recent):.2f}", best_val=f"{max(best, 0):.3f}", updates=agent.updates)
-        if steps >= next_eval or steps >= cfg.total_steps or stop_now:
-            next_eval += cfg.eval_every
-            agent.actor.eval()
-
-            def validate(averaged: bool) -> list[Any]:
-                return rollout_batch(lambda o, qq, g: agent.act(o, qq, g, deterministic=True, averaged=averaged), robot, env_cfg, val_problems, scenario.horizon, seed=cfg.seed)
-
-            res = validate(averaged=True)
-            raw: dict[str, float] = {}
-            if agent.actor_avg is not None:  # the current actor too, for comparison
-                raw["val_success_current"] = float(np.mean([r.success for r in validate(averaged=False)]))
-            if pool is not None:
-                if cfg.mine_episodes > 0:  # failures of the deterministic policy on fresh problems
-                    mined = []
-                    for _ in range(cfg.mine_episodes):
-                        scene = scenario.scene("train", int(rng.integers(0, 2**31 - 1)))
-                        mined.append(Problem(scene, *scenario.sample_problem(scene, rng)))
-                    mres = rollout_batch(lambda o, qq, g: agent.act(o, qq, g, deterministic=True, averaged=True), robot, env_cfg, mined, scenario.horizon, seed=steps)
-                    for p, r in zip(mined, mres, strict=True):
-                        if not r.success:
-                            pool.failed(p)
-                    raw["mine_success"] = float(np.mean([r.success for r in mres]))
-                raw["pool_size"] = float(len(pool))
-                raw["retry_share"] = source.retry_share
-            agent.actor.train()
-            val = float(np.mean([r.success for r in res]))
-            nodes_all = float(np.mean([r.nodes for r in res]))
-            # the best checkpoint: highest validation success, then fewest steps
-            improved = val > best or (val == best and nodes_all < best_nodes)
-            wall = elapsed_before + time.perf_counter() - t_start
-            row = {
-                "env_steps": float(steps),
-                "updates": float(agent.updates),
-                "wall_time_s": wall,
-                "val_success": val,
-                "train_success": float(np.mean(recent)) if recent else 0.0,
-                "val_nodes": float(np.mean([r.nodes for r in res if r.success])) if any(r.success for r in res) else 0.0,
-                **raw,
-                **{k: float(v) for k, v in last_losses.items()},
-            }
-            history.append(row)
-            logger.log(row)
-            if on_eval is not None:
-                on_eval(row)
-            trainer_state = {
-                "agent": agent.state_dict(),
-                "steps": steps,
-                "best": max(best, val),
-                "best_nodes": nodes_all if improved else best_nodes,
-                "wall_time_s": wall,
-                "rng": rng.bit_generator.state,
-                "torch_rng": torch.get_rng_state(),
-            }
-            extra = {"env_steps": steps, "val_success": val, "wall_time_s": wall, "horizon": core.horizon}
-            save_checkpoint(run_dir / "last.pt", {**_checkpoint_payload(cfg, agent, obs_shape, robot.name, extra), "trainer": trainer_state})
-            if improved:
-                best, best_nodes = val, nodes_all
-                save_checkpoint(run_dir / "best.pt", _checkpoint_payload(cfg, agent, obs_shape, robot.name, extra))
-            if bar is not None:
-                bar.write(f"step {steps}: val success {val:.3f} (best {best:.3f}), {wall:.0f} s")
-            if val >= cfg.target_success or stop_now:
+        bar = tqdm(total=cfg.total_steps, initial=run.steps, unit="step", dynamic_ncols=True)
+    with _StopOnCtrlC(enabled=remote is None) as ctrl_c:  # (Ray rollouts handle Ctrl-C themselves)
+        while run.steps < cfg.total_steps and not ctrl_c.requested:
+            stop_now = remote is not None and remote.interrupted
+            collected = _collect(run) if remote is None else _collect_remote(run, remote)
+            _learn(run, collected)
+            finished = False
+            if run.steps >= run.next_eval or run.steps >= cfg.total_steps or stop_now:
+                run.next_eval += cfg.eval_every
+                finished = _evaluate(run, on_eval, bar) >= cfg.target_success or stop_now
+            _progress(run, bar, collected)
+            if finished:
                 break
     if bar is not None:
         bar.close()
-    wall = elapsed_before + time.perf_counter() - t_start
-    return TrainResult(run_dir=run_dir, best_success=best, steps=steps, wall_time_s=wall, history=history)
-
-
-def with_overrides(cfg: TrainConfig, **kw: Any) -> TrainConfig:
-    """A copy of ``cfg`` with some fields replaced."""
-    return replace(cfg, **kw)
+    if ctrl_c.requested:
+        _save_interrupted(run)
+    return TrainResult(run_dir=run.run_dir, best_success=run.best, steps=run.steps, wall_time_s=run.wall, history=run.history, interrupted=ctrl_c.requested)

@@ -52,7 +52,7 @@ class Actor(nn.Module):
         super().__init__()
         self.encoder = encoder if encoder is not None else make_encoder(cfg.encoder, obs_shape)
         self.detach_encoder = encoder is not None
-        feat = self.encoder.features_dim
+        feat = int(getattr(self.encoder, "features_dim"))
         self.head = mlp([feat + goal_dim] + [cfg.head_width] * cfg.head_layers + [2 * action_dim])
         self.action_dim = action_dim
 
@@ -89,7 +89,7 @@ class QNetwork(nn.Module):
         self.on_points = cfg.critic_action == "points"
         extra = action_dim if self.on_points else 0
         self.encoder = encoder if encoder is not None else make_encoder(cfg.encoder, obs_shape, extra=extra)
-        feat = self.encoder.features_dim
+        feat = int(getattr(self.encoder, "features_dim"))
         head_in = feat + goal_dim + (0 if self.on_points else action_dim)
         self.head = mlp([head_in] + [cfg.head_width] * cfg.head_layers + [1])
 
@@ -105,6 +105,8 @@ class QNetwork(nn.Module):
 
 class TwinCritic(nn.Module):
     """Two Q-networks; with a shared encoder the pooled features are computed once."""
+
+    shared: nn.Module | None
 
     def __init__(self, obs_shape: tuple[int, ...], goal_dim: int, action_dim: int, cfg: NetConfig, encoder: nn.Module | None = None) -> None:
         super().__init__()

@@ -11,18 +11,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..learning.checkpoint import check_compatible, load_checkpoint
+from ..config import from_dict
 from ..robots import make_robot
 from ..robots.base import Robot
 from .actor_critic import Actor, NetConfig
-from .encoders import EncoderConfig
+from .checkpoint import check_compatible, load_checkpoint
 from .inputs import goal_input, obs_input
-
-
-def net_config_from_dict(d: dict[str, Any]) -> NetConfig:
-    d = dict(d)
-    d["encoder"] = EncoderConfig(**d["encoder"])
-    return NetConfig(**d)
 
 
 class Policy:
@@ -50,7 +44,7 @@ class Policy:
     def from_checkpoint(cls, path: str | Path, device: str = "cpu") -> Policy:
         data = load_checkpoint(path, device)
         robot = make_robot(data["robot"])
-        net = net_config_from_dict(data["net"])
+        net = from_dict(NetConfig, data["net"])
         actor = Actor(tuple(data["obs_shape"]), robot.twist_dim, robot.twist_dim, net)
         actor.load_state_dict(data["actor"])  # a shared encoder's weights come with the actor
         actor.detach_encoder = False
@@ -94,7 +88,9 @@ class NumpyPointNetActor:
     about 1e-6). ``obs_in: (..., N, F)`` and ``goal_in: (..., G)`` are the network inputs
     (:func:`obs_input`, :func:`goal_input`)."""
 
-    def __init__(self, inp: tuple[np.ndarray, np.ndarray], hidden: list[tuple[np.ndarray, np.ndarray]], head: list[tuple[np.ndarray, np.ndarray]], action_dim: int) -> None:
+    def __init__(
+        self, inp: tuple[np.ndarray, np.ndarray], hidden: list[tuple[np.ndarray, np.ndarray]], head: list[tuple[np.ndarray, np.ndarray]], action_dim: int
+    ) -> None:
         self.inp = inp
         self.hidden = hidden
         self.head = head
@@ -112,15 +108,18 @@ class NumpyPointNetActor:
         if type(enc) is not PointNetEncoder or enc.extra or not isinstance(enc.act, nn.ELU) or enc.act.alpha != 1.0:
             return None
         mods = list(actor.head)
-        linears = mods[0::2]
-        if not all(isinstance(m, nn.Linear) for m in linears) or not all(isinstance(m, nn.ELU) and m.alpha == 1.0 for m in mods[1::2]) or len(mods) % 2 != 1:
+        linears = [m for m in mods[0::2] if isinstance(m, nn.Linear)]
+        if len(linears) != len(mods[0::2]) or not all(isinstance(m, nn.ELU) and m.alpha == 1.0 for m in mods[1::2]) or len(mods) % 2 != 1:
             return None
 
         def wb(layer: nn.Linear) -> tuple[np.ndarray, np.ndarray]:
             w = layer.weight.detach().cpu().numpy().astype(np.float32).T.copy()
             return w, layer.bias.detach().cpu().numpy().astype(np.float32).copy()
 
-        return cls(wb(enc.inp), [wb(m) for m in enc.hidden], [wb(m) for m in linears], actor.action_dim)
+        hidden = [m for m in enc.hidden if isinstance(m, nn.Linear)]
+        if len(hidden) != len(enc.hidden):
+            return None
+        return cls(wb(enc.inp), [wb(m) for m in hidden], [wb(m) for m in linears], actor.action_dim)
 
     def __call__(self, obs_in: np.ndarray, goal_in: np.ndarray) -> np.ndarray:
         w, b = self.inp
@@ -188,5 +187,7 @@ def shipped_checkpoint(robot: str = "disc2d", observation: str | None = None) ->
     path = Path(str(files("pointplan") / "data" / name)) if name else None
     if path is None or not path.is_file():
         have = ", ".join(f"{r} with {o!r} points" for r, o in shipped_policies()) or "none"
-        raise ValueError(f"no policy ships for robot {robot!r} with {observation!r} observations (shipped: {have}); pass --checkpoint PATH, or train one with `pointplan train`")
+        raise ValueError(
+            f"no policy ships for robot {robot!r} with {observation!r} observations (shipped: {have}); pass --checkpoint PATH, or train one with `pointplan train`"
+        )
     return path

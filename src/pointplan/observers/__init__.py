@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from ..robots.base import Robot
 from .base import Observer, PointSetObserver
 from .image import OccupancyImage
@@ -30,4 +32,28 @@ def make_observer(name: str, robot: Robot, **kwargs: Any) -> Observer:
     return cls(robot, **kwargs)  # type: ignore[call-arg]
 
 
-__all__ = ["OBSERVERS", "GlobalPoints", "InteriorPoints", "LocalRays", "Observer", "OccupancyImage", "PointSetObserver", "SurfaceNormals", "SurfacePoints", "make_observer"]
+def world_observation(problem: Any, robot: Robot, observation: str, n_points: int | None, q: Any, t: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """What the robot at ``q`` (time ``t``) observes, back in the world frame: the points
+    and their normals (3D; padding rows dropped)."""
+    observer = make_observer(observation, robot, **({"n_points": n_points} if n_points else {}))
+    observer.bind([problem.scene])
+    q = np.asarray(q, np.float64)
+    obs = observer.observe(q[None], np.random.default_rng(seed), np.array([t]))[0]
+    rot, pos = robot.rotations(q), robot.positions(q)
+    keep = np.any(obs != 0.0, axis=1)
+    return obs[keep, :3] @ rot.T + pos, obs[keep, 3:6] @ rot.T
+
+
+__all__ = [
+    "OBSERVERS",
+    "GlobalPoints",
+    "InteriorPoints",
+    "LocalRays",
+    "Observer",
+    "OccupancyImage",
+    "PointSetObserver",
+    "SurfaceNormals",
+    "SurfacePoints",
+    "make_observer",
+    "world_observation",
+]

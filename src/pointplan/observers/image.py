@@ -6,6 +6,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
+from ..geometry.collision import CollisionWorld
 from ..geometry.shapes import Box
 from ..robots.base import Robot
 from .base import Array, Observer
@@ -28,7 +29,7 @@ class OccupancyImage(Observer):
         u = (np.arange(self.size) + 0.5) / self.size * 2 * self.extent - self.extent
         self._u = u
         self._offsets = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2)
-        self._world = None
+        self._world: CollisionWorld | None = None
         self._only_boxes = False
         # a single disc centred on the body frame: boxes are then rasterised per axis
         parts = robot.parts

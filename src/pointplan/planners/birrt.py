@@ -21,8 +21,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..robots.base import Robot
-from ..scenes.scene import Problem
 from ..robots.motion import segments_free
+from ..scenes.scene import Problem
 from .base import Array, PlanResult, check_free, march
 
 _SAMPLE_BLOCK = 256

@@ -18,7 +18,9 @@ from .base import Array, march
 _ONE_EDGE = 1e12
 
 
-def edge_free(robot: Robot, problem_or_world: object, a: Array, b: Array, resolution: float = 0.01, low: Array | None = None, high: Array | None = None) -> tuple[bool, int]:
+def edge_free(
+    robot: Robot, problem_or_world: object, a: Array, b: Array, resolution: float = 0.01, low: Array | None = None, high: Array | None = None
+) -> tuple[bool, int]:
     """Is the geodesic ``a -> b`` collision-free and inside the bounds (checked as one edge
     on the evaluator's grid, both ends included)? Returns the answer and the number of
     configurations checked. ``problem_or_world`` is what :func:`march` takes."""

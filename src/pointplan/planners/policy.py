@@ -23,19 +23,19 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..envs.core import BatchedCore, EnvConfig, q_free
+from ..observers.base import PointSetObserver
 from ..robots.base import Robot
 from ..robots.point import Disc2D, Sphere3D
 from ..scenes.scenarios import Scenario
 from ..scenes.scene import Problem, Scene
 from .base import PlanResult
-from ..observers.base import PointSetObserver
 from .edges import edge_free
 
 ActFn = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
@@ -172,6 +172,22 @@ def rollout_batch(
                 res = connect_to_goal(robot, probs[i], res, t=k)
             results.append(res)
     return results
+
+
+@dataclass
+class _Rollout:
+    """One robot's rollout in :meth:`PolicyPlanner._rollout_one`: where it is, its path
+    and counters, and the time spent observing, in the network and checking motions."""
+
+    q: np.ndarray
+    path: list[np.ndarray]
+    t: int = 0
+    checks: int = 0
+    success: bool = False
+    end: str = "horizon"
+    t_obs: float = 0.0
+    t_net: float = 0.0
+    t_motion: float = 0.0
 
 
 class PolicyPlanner:
@@ -318,93 +334,95 @@ class PolicyPlanner:
         the result is the sequential rollout's, at one motion-check call per run ahead
         instead of one per step."""
         t0 = time.perf_counter()
-        robot, env, scene = self.robot, self.env, problem.scene
+        robot, scene = self.robot, problem.scene
         if problem.start.shape != (robot.config_dim,):
             raise ValueError(f"problem {problem.tag or ''} does not fit robot {robot.name}")
-        observer = self._observer
-        observer.set_scene(0, scene)
-        per_step = observer.draws_one()
-        k_draws = self.draws
+        self._observer.set_scene(0, scene)
         lean = self._lean_step()
-        world, low1, high1 = scene.world, scene.low[None], scene.high[None]
         goal = np.asarray(problem.goal, np.float64)
-        clip_target = env.bounds == "clip"
-        tol, horizon, stall = env.goal_tolerance, self.horizon, self.stall_steps
         q = np.asarray(problem.start, np.float64).copy()
-        path = [q]
-        checks = 0
-        success = False
-        end = "horizon"
-        stall_r = self.stall_distance
-        scale = np.asarray(robot.action_scale, np.float64)
-        t_obs = t_net = t_motion = 0.0
-        t = 0  # steps taken (verified)
+        r = _Rollout(q=q, path=[q])
         ctx = torch_threads(1) if self.fast is None else contextlib.nullcontext()
         with ctx:
-            while t < horizon and not success and end == "horizon":
-                # run ahead from (q, t), every move assumed free
-                qs, twists, dists = [q], [], []
-                qq = q
-                for s in range(t, horizon):
-                    blk = per_step * k_draws
-                    u = self._uniforms((s + 1) * blk)[s * blk : (s + 1) * blk]
-                    ta = time.perf_counter()
-                    if lean is not None:  # observation and network in one (timed as network)
-                        tb = ta
-                        a = lean(qq, goal, u) if k_draws == 1 else np.mean([lean(qq, goal, u[j * per_step : (j + 1) * per_step]) for j in range(k_draws)], 0)
-                    elif k_draws == 1:
-                        obs = observer.observe_one(qq, u=u)
-                        tb = time.perf_counter()
-                        a = self._act(obs, qq, goal)
-                    else:  # observing and acting interleaved: timed as network
-                        tb = ta
-                        a = np.mean([self._act(observer.observe_one(qq, u=u[j * per_step : (j + 1) * per_step]), qq, goal) for j in range(k_draws)], 0)
-                    tc = time.perf_counter()
-                    tw = np.clip(a, -1.0, 1.0) * scale  # float64, as the env computes it
-                    qq = _free_move_end(robot, qq, tw, scene.low, scene.high, clip_target)
-                    t_obs += tb - ta
-                    t_net += tc - tb
-                    t_motion += time.perf_counter() - tc
-                    twists.append(tw)
-                    qs.append(qq)
-                    d = float(robot.distance(qq, goal))
-                    dists.append(d)
-                    if d < tol:
-                        break
-                    if stall is not None and s + 1 >= stall:
-                        back = s + 1 - stall  # the step ``stall`` steps before this one
-                        if float(robot.distance(qq, qs[back - t] if back >= t else path[back])) < stall_r:
-                            break
-                # check every move of the run in one call; keep what agrees
-                tc = time.perf_counter()
-                k = len(twists)
-                new_q, collided, n = q_free(robot, world, np.stack(qs[:-1]), np.stack(twists), np.repeat(low1, k, 0), np.repeat(high1, k, 0), env.substep, clip_target=clip_target)
-                t_motion += time.perf_counter() - tc
-                for j in range(k):
-                    q = new_q[j]
-                    path.append(q)
-                    checks += int(n[j])
-                    t += 1
-                    agrees = not collided[j] and np.array_equal(q, qs[j + 1])
-                    d = dists[j] if agrees else float(robot.distance(q, goal))
-                    if d < tol and not collided[j]:
-                        success = True
-                        break
-                    if stall is not None and t >= stall and float(robot.distance(q, path[t - stall])) < stall_r:
-                        end = "stalled"
-                        break
-                    if not agrees:
-                        break  # the run ahead went elsewhere from here: run again from q
-        steps = len(path) - 1
-        res = PlanResult(path=np.stack(path), success=success, nodes=steps, collision_checks=checks, time_s=time.perf_counter() - t0)
-        res.info["time_split"] = {"observe": t_obs, "network": t_net, "motion": t_motion, "steps": steps}
-        if not success:
-            res.info["end"] = end
+            while r.t < self.horizon and not r.success and r.end == "horizon":
+                qs, twists, dists = self._run_ahead(r, scene, goal, lean)
+                self._keep_agreeing(r, scene, goal, qs, twists, dists)
+        steps = len(r.path) - 1
+        res = PlanResult(path=np.stack(r.path), success=r.success, nodes=steps, collision_checks=r.checks, time_s=time.perf_counter() - t0)
+        res.info["time_split"] = {"observe": r.t_obs, "network": r.t_net, "motion": r.t_motion, "steps": steps}
+        if not r.success:
+            res.info["end"] = r.end
         if self.connect_goal:
             res = connect_to_goal(robot, problem, res)
         else:
-            res.info.setdefault("end", "near-goal" if success else end)
+            res.info.setdefault("end", "near-goal" if r.success else r.end)
         return res
+
+    def _run_ahead(self, r: _Rollout, scene: Scene, goal: np.ndarray, lean: Any) -> tuple[list[np.ndarray], list[np.ndarray], list[float]]:
+        """Steps of the policy from ``(r.q, r.t)``, every move assumed free: the
+        configurations (``r.q`` first), the twists and the distances to the goal."""
+        robot, observer, stall, stall_r = self.robot, self._observer, self.stall_steps, self.stall_distance
+        per_step, tol, k_draws = observer.draws_one(), self.env.goal_tolerance, self.draws
+        blk = per_step * k_draws
+        clip_target = self.env.bounds == "clip"
+        scale = np.asarray(robot.action_scale, np.float64)
+        qs, twists, dists = [r.q], [], []
+        qq, t = r.q, r.t
+        for s in range(t, self.horizon):
+            u = self._uniforms((s + 1) * blk)[s * blk : (s + 1) * blk]
+            ta = time.perf_counter()
+            if lean is not None:  # observation and network in one (timed as network)
+                tb = ta
+                a = lean(qq, goal, u) if k_draws == 1 else np.mean([lean(qq, goal, u[j * per_step : (j + 1) * per_step]) for j in range(k_draws)], 0)
+            elif k_draws == 1:
+                obs = observer.observe_one(qq, u=u)
+                tb = time.perf_counter()
+                a = self._act(obs, qq, goal)
+            else:  # observing and acting interleaved: timed as network
+                tb = ta
+                a = np.mean([self._act(observer.observe_one(qq, u=u[j * per_step : (j + 1) * per_step]), qq, goal) for j in range(k_draws)], 0)
+            tc = time.perf_counter()
+            tw = np.clip(a, -1.0, 1.0) * scale  # float64, as the env computes it
+            qq = _free_move_end(robot, qq, tw, scene.low, scene.high, clip_target)
+            r.t_obs += tb - ta
+            r.t_net += tc - tb
+            r.t_motion += time.perf_counter() - tc
+            twists.append(tw)
+            qs.append(qq)
+            d = float(robot.distance(qq, goal))
+            dists.append(d)
+            if d < tol:
+                break
+            if stall is not None and s + 1 >= stall:
+                back = s + 1 - stall  # the step ``stall`` steps before this one
+                if float(robot.distance(qq, qs[back - t] if back >= t else r.path[back])) < stall_r:
+                    break
+        return qs, twists, dists
+
+    def _keep_agreeing(self, r: _Rollout, scene: Scene, goal: np.ndarray, qs: list[np.ndarray], twists: list[np.ndarray], dists: list[float]) -> None:
+        """Check every move of the run ahead in one ``q_free`` call; advance ``r`` by the
+        moves up to the first that ends elsewhere (or the end of the episode)."""
+        robot, env, stall, stall_r = self.robot, self.env, self.stall_steps, self.stall_distance
+        tc = time.perf_counter()
+        k = len(twists)
+        low, high = np.repeat(scene.low[None], k, 0), np.repeat(scene.high[None], k, 0)
+        new_q, collided, n = q_free(robot, scene.world, np.stack(qs[:-1]), np.stack(twists), low, high, env.substep, clip_target=env.bounds == "clip")
+        r.t_motion += time.perf_counter() - tc
+        for j in range(k):
+            r.q = new_q[j]
+            r.path.append(r.q)
+            r.checks += int(n[j])
+            r.t += 1
+            agrees = not collided[j] and np.array_equal(r.q, qs[j + 1])
+            d = dists[j] if agrees else float(robot.distance(r.q, goal))
+            if d < env.goal_tolerance and not collided[j]:
+                r.success = True
+                return
+            if stall is not None and r.t >= stall and float(robot.distance(r.q, r.path[r.t - stall])) < stall_r:
+                r.end = "stalled"
+                return
+            if not agrees:
+                return  # the run ahead went elsewhere from here: run again from r.q
 
     def plan_many(self, problems: Sequence[Problem]) -> list[PlanResult]:
         """All problems at once (much faster than one by one; one by one with an

@@ -235,7 +235,14 @@ class Robot(ABC):
         return cached
 
     def check_motions(
-        self, world: CollisionWorld, q0: Array, twist: Array, n: Array, low: Array | None = None, high: Array | None = None, fallback: Bool | None = None
+        self,
+        world: CollisionWorld,
+        q0: Array,
+        twist: Array,
+        n: NDArray[np.int64],
+        low: Array | None = None,
+        high: Array | None = None,
+        fallback: Bool | None = None,
     ) -> MotionCheck:
         """Certify motions ``q0 exp(s twist)`` in ``n`` sub-steps each: see
         :func:`pointplan.robots.motion.check_motions`."""

@@ -147,7 +147,9 @@ def check_motions(
     return MotionCheck(free=np.where(stopped, first, n + 1) - 1, collided=stopped & hit, checks=checks, configs=qs)
 
 
-def segments_free(robot: Robot, world: CollisionWorld, a: Array, b: Array, resolution: float, low: Array | None = None, high: Array | None = None) -> tuple[Bool, Int]:
+def segments_free(
+    robot: Robot, world: CollisionWorld, a: Array, b: Array, resolution: float, low: Array | None = None, high: Array | None = None
+) -> tuple[Bool, Int]:
     """Are the geodesics ``a[e] -> b[e]`` (``(E, config_dim)`` each) certified free (and
     inside the bounds)? Each is sampled in ``intervals(length, resolution)`` sub-steps.
     Returns ``(E,)`` booleans and the configurations checked per segment."""

@@ -7,11 +7,7 @@ import math
 import numpy as np
 
 from ..geometry import lie
-from ..geometry._se3_kernels import (
-    HAVE_NUMBA,
-    pose_integrate_compiled,
-    pose_log_compiled,
-)
+from ..geometry._se3_kernels import pose_integrate_compiled, pose_log_compiled
 from .base import Array, BodyParts, Robot
 
 #: centreline corners of the S-shape, body frame (from the paper's release)
@@ -93,19 +89,14 @@ class SShape(Robot):
         t = np.asarray(t, np.float64)
         return np.concatenate([t[..., :3, 3], lie.matrix_to_quat(t[..., :3, :3])], -1)
 
-    # integrate and log take the compiled quaternion kernels when numba is there (10-40x
-    # faster for the 1 to 256 configurations a planner passes per call); the numpy
-    # versions through 4x4 matrices are the reference, and what runs without numba.
-    # Tests and benchmarks select them by setting this module's HAVE_NUMBA to False.
+    # integrate and log take the compiled quaternion kernels (10-40x faster for the 1 to
+    # 256 configurations a planner passes per call); the numpy versions through 4x4
+    # matrices are the reference (``NumpySShape`` uses them), for tests and benchmarks.
     def integrate(self, q: Array, v: Array) -> Array:
-        if not HAVE_NUMBA:
-            return self._integrate_numpy(q, v)
         batch, qf, vf = _flat_pair(q, v, 7, 6)
         return pose_integrate_compiled(qf, vf).reshape(batch + (7,))
 
     def log(self, q0: Array, q1: Array) -> Array:
-        if not HAVE_NUMBA:
-            return self._log_numpy(q0, q1)
         batch, af, bf = _flat_pair(q0, q1, 7, 7)
         return pose_log_compiled(af, bf).reshape(batch + (6,))
 
@@ -122,3 +113,14 @@ class SShape(Robot):
 
     def sample_orientation(self, rng: np.random.Generator, n: int) -> Array:
         return lie.matrix_to_quat(lie.random_rotations(rng, n))
+
+
+class NumpySShape(SShape):
+    """The S-shape with ``integrate`` and ``log`` through 4x4 matrices (numpy): the
+    reference the compiled kernels are tested and benchmarked against."""
+
+    def integrate(self, q: Array, v: Array) -> Array:
+        return self._integrate_numpy(q, v)
+
+    def log(self, q0: Array, q1: Array) -> Array:
+        return self._log_numpy(q0, q1)

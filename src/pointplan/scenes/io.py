@@ -158,12 +158,7 @@ class _Reader:
         return float(value)
 
     def vector(self, value: Any, where: str, n: int, positive: bool = False, nonzero: bool = False) -> Array:
-        ok = (
-            isinstance(value, list)
-            and len(value) == n
-            and all(_is_number(x) for x in value)
-            and (not positive or all(x > 0 for x in value))
-        )
+        ok = isinstance(value, list) and len(value) == n and all(_is_number(x) for x in value) and (not positive or all(x > 0 for x in value))
         if not ok:
             adj = "positive numbers" if positive else "numbers"
             self.fail(where, f"expected {n} {adj}, got {_show(value)}")
@@ -250,7 +245,7 @@ class _Reader:
             center = self.vector(need("center"), at("center"), dim)
             size = self.vector(need("size"), at("size"), dim, positive=True)
             if dim == 2:
-                rot = lie.so2_exp(self.number(entry.get("angle", 0.0), at("angle")))
+                rot = lie.so2_exp(np.asarray(self.number(entry.get("angle", 0.0), at("angle"))))
             else:
                 rot = self.quaternion(entry["quaternion"], at("quaternion")) if "quaternion" in entry else np.eye(3)
             return Box(center=center, size=size, rotation=rot)
@@ -428,8 +423,7 @@ class _Reader:
         if np.any(pos < scene.low) or np.any(pos > scene.high):
             self.fail(
                 where,
-                f"position {_show(pos.tolist())} lies outside the bounds "
-                f"{_show(scene.low.tolist())} .. {_show(scene.high.tolist())}",
+                f"position {_show(pos.tolist())} lies outside the bounds {_show(scene.low.tolist())} .. {_show(scene.high.tolist())}",
             )
         if len(q) > dim:  # (x, y, z, qx, qy, qz, qw)
             norm = np.linalg.norm(q[dim:])
@@ -464,7 +458,7 @@ def load_scene(path: str | os.PathLike[str]) -> SceneFile:
 def load_points_scene(
     path: str | os.PathLike[str],
     dim: int | None = None,
-    bounds: tuple[Sequence[float], Sequence[float]] | None = None,
+    bounds: tuple[Sequence[float] | np.ndarray, Sequence[float] | np.ndarray] | None = None,
     pad: float = 0.1,
     k: int = DEFAULT_K,
     viewpoint: Sequence[float] | None = None,
@@ -517,8 +511,8 @@ def _is_rotation(r: Array) -> bool:
 def _write_obj(path: Path, mesh: Mesh) -> None:
     """Wavefront OBJ with exact (shortest round-trip) coordinates."""
     lines = ["# pointplan mesh obstacle (world frame)"]
-    lines += ["v %r %r %r" % tuple(float(x) for x in v) for v in mesh.vertices]
-    lines += ["f %d %d %d" % tuple(int(i) + 1 for i in f) for f in mesh.faces]
+    lines += [" ".join(["v", *(repr(float(x)) for x in v)]) for v in mesh.vertices]
+    lines += [" ".join(["f", *(str(int(i) + 1) for i in f)]) for f in mesh.faces]
     path.write_text("\n".join(lines) + "\n")
 
 

@@ -50,9 +50,9 @@ def _boxes_from_intervals(axis: int, lo: float, hi: float, holes: list[tuple[flo
         if b - a <= 1e-9:
             continue
         if axis == 0:
-            boxes.append(Box(center=[(a + b) / 2, (lo + hi) / 2], size=[b - a, hi - lo]))
+            boxes.append(Box(center=np.array([(a + b) / 2, (lo + hi) / 2]), size=np.array([b - a, hi - lo])))
         else:
-            boxes.append(Box(center=[(lo + hi) / 2, (a + b) / 2], size=[hi - lo, b - a]))
+            boxes.append(Box(center=np.array([(lo + hi) / 2, (a + b) / 2]), size=np.array([hi - lo, b - a])))
     return boxes
 
 

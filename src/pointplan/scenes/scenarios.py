@@ -29,6 +29,13 @@ class Scenario(ABC):
     def scene(self, split: str, index: int) -> Scene:
         """Workspace ``index`` of ``split`` (``train`` or ``test``); splits are disjoint."""
 
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The workspace bounds ``(low, high)`` shared by every scene of the scenario
+        (subclasses answer without building a scene)."""
+        ref = self.scene("test", 0)
+        return ref.low.copy(), ref.high.copy()
+
     def sample_problem(self, scene: Scene, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """A collision-free start and goal drawn uniformly in ``scene``."""
         q = self.robot.sample_free(scene.world, rng, 2, scene.low, scene.high)
@@ -63,6 +70,10 @@ class Narrow2DScenario(Scenario):
     def problem(self, split: str, index: int, seed: int = 0) -> Problem:
         return narrow2d.problem(split, index, seed, self.robot)
 
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros(2), np.ones(2)
+
 
 class FixedScenario(Scenario):
     """One scene (e.g. loaded from a file) for every split, with optional fixed problems."""
@@ -76,6 +87,10 @@ class FixedScenario(Scenario):
 
     def scene(self, split: str, index: int) -> Scene:
         return self._scene
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._scene.low.copy(), self._scene.high.copy()
 
     def problem(self, split: str, index: int, seed: int = 0) -> Problem:
         if self.fixed:
@@ -100,6 +115,10 @@ class Empty2DScenario(Scenario):
 
     def scene(self, split: str, index: int) -> Scene:
         return self._scene
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._scene.low.copy(), self._scene.high.copy()
 
 
 SCENARIOS: dict[str, type[Scenario]] = {"narrow2d": Narrow2DScenario, "empty2d": Empty2DScenario}

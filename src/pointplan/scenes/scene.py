@@ -40,7 +40,6 @@ class Scene:
         """The packed obstacles, built once."""
         return CollisionWorld.from_shapes(self.obstacles, self.dim)
 
-
     #: whether obstacles move with time (see :class:`DynamicScene`)
     dynamic = False
 
@@ -68,14 +67,15 @@ class DynamicScene(Scene):
     def __init__(self, obstacles: Sequence[Box], targets: Sequence[Box], low: Array, high: Array, period: int = 80, name: str = "") -> None:
         super().__init__(obstacles, low, high, name)
         self.targets = list(targets)
-        if len(self.targets) != len(self.obstacles) or not all(isinstance(b, Box) for b in list(self.obstacles) + self.targets):
+        self.boxes = [b for b in self.obstacles if isinstance(b, Box)]
+        if len(self.targets) != len(self.obstacles) or len(self.boxes) != len(self.obstacles) or not all(isinstance(b, Box) for b in self.targets):
             raise ValueError("a dynamic scene needs one target box per obstacle box")
         self.period = int(period)
         self._worlds: dict[int, CollisionWorld] = {}
         # relative rotations as rotation vectors, for the geodesic interpolation
         from ..geometry import lie
 
-        rel = np.stack([a.rotation.T @ b.rotation for a, b in zip(self.obstacles, self.targets)]) if self.targets else np.zeros((0, 3, 3))
+        rel = np.stack([a.rotation.T @ b.rotation for a, b in zip(self.boxes, self.targets)]) if self.targets else np.zeros((0, 3, 3))
         self._rel_rotvec = lie.so3_log(rel) if len(rel) else np.zeros((0, 3))
 
     def fraction(self, t: int | Array) -> Array:
@@ -87,9 +87,9 @@ class DynamicScene(Scene):
         from ..geometry import lie
 
         s = float(self.fraction(t))
-        c0 = np.stack([b.center for b in self.obstacles])
+        c0 = np.stack([b.center for b in self.boxes])
         c1 = np.stack([b.center for b in self.targets])
-        r0 = np.stack([b.rotation for b in self.obstacles])
+        r0 = np.stack([b.rotation for b in self.boxes])
         return c0 + s * (c1 - c0), r0 @ lie.so3_exp(s * self._rel_rotvec)
 
     def obstacles_at(self, t: int) -> list[Shape]:

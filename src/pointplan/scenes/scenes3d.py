@@ -13,6 +13,7 @@ import zlib
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -67,6 +68,10 @@ class Scenario3D(Scenario):
             raise ValueError(f"{self.name} is a 3D scenario; robot {self.robot.name} is {self.robot.dim}D (use sphere3d or sshape)")
         self.config = config or BoxesConfig()
         self._cache: OrderedDict[tuple[str, int], Scene] = OrderedDict()
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return LOW.copy(), HIGH.copy()
 
     def scene(self, split: str, index: int) -> Scene:
         key = (split, int(index))
@@ -145,7 +150,9 @@ class YCB3DScenario(Scenario3D):
 
     name = "ycb3d"
 
-    def __init__(self, robot: str | Robot | None = None, config: BoxesConfig | None = None, objects: dict[str, object] | None = None, max_faces: int = 800) -> None:
+    def __init__(
+        self, robot: str | Robot | None = None, config: BoxesConfig | None = None, objects: dict[str, str | Path] | None = None, max_faces: int = 800
+    ) -> None:
         super().__init__(robot, config)
         from . import ycb
 
@@ -247,9 +254,9 @@ class SlotScenario(Scenario3D):
         lo, hi = mid - ext / 2, mid + ext / 2
         # wall = four boxes around the opening: below/above along y, then left/right along z
         for a, b in ((-e, lo[1]), (hi[1], e)):
-            boxes.append(Box([0.0, (a + b) / 2, 0.0], [t, b - a, 2 * e]))
+            boxes.append(Box(np.array([0.0, (a + b) / 2, 0.0]), np.array([t, b - a, 2 * e])))
         for a, b in ((-e, lo[2]), (hi[2], e)):
-            boxes.append(Box([0.0, mid[1], (a + b) / 2], [t, hi[1] - lo[1], b - a]))
+            boxes.append(Box(np.array([0.0, mid[1], (a + b) / 2]), np.array([t, hi[1] - lo[1], b - a])))
         scene = Scene(boxes, LOW, HIGH)
         scene.__dict__["slot"] = {"width": width, "center": mid, "long_axis": long_axis}
         return scene

@@ -113,8 +113,7 @@ def default_ycb_objects() -> dict[str, Path]:
             return found
         tried.append(f"{what} ({folder})")
     raise FileNotFoundError(
-        "no bundled YCB meshes found; looked in " + "; ".join(tried)
-        + ". Pass find_ycb_objects('<your YCB download>') instead (see docs/ycb.md)"
+        "no bundled YCB meshes found; looked in " + "; ".join(tried) + ". Pass find_ycb_objects('<your YCB download>') instead (see docs/ycb.md)"
     )
 
 

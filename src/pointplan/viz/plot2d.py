@@ -17,6 +17,7 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
+from matplotlib.layout_engine import ConstrainedLayoutEngine
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Polygon, Rectangle
 from numpy.typing import NDArray
@@ -51,7 +52,9 @@ C_TREES = ("#66bd63", "#f4a261", "#74add1", "#e78ac3")
 # ---------------------------------------------------------------------------- helpers
 def _new_figure(figsize: tuple[float, float], dpi: float) -> Figure:
     fig = Figure(figsize=figsize, dpi=dpi, layout="constrained")
-    fig.get_layout_engine().set(w_pad=0.1, h_pad=0.1)  # inches kept free around the edge
+    engine = fig.get_layout_engine()
+    assert isinstance(engine, ConstrainedLayoutEngine)
+    engine.set(w_pad=0.1, h_pad=0.1)  # inches kept free around the edge
     FigureCanvasAgg(fig)
     return fig
 
@@ -134,9 +137,9 @@ def _observation_to_world(observation: Array, robot: Robot | None, start: Array)
 def _tree_segments(nodes: Array, parents: Array) -> Array:
     """Edges ``(k, 2, 2)`` from every non-root node to its parent."""
     nodes = np.asarray(nodes, np.float64)
-    parents = np.asarray(parents, np.int64).reshape(-1)
-    child = np.flatnonzero(parents >= 0)
-    return np.stack([nodes[child, :2], nodes[parents[child], :2]], 1)
+    parent_of = np.asarray(parents, np.int64).reshape(-1)
+    child = np.flatnonzero(parent_of >= 0)
+    return np.stack([nodes[child, :2], nodes[parent_of[child], :2]], 1)
 
 
 def _result_summary(result: Any) -> str:
@@ -163,6 +166,53 @@ def _path_of(result: Any, path: Array | None) -> Array | None:
 
 
 # ---------------------------------------------------------------------------- drawing
+def _draw_trees(ax: Axes, trees: Sequence[Any]) -> None:
+    """Search trees ``(nodes, parents)``: one LineCollection per tree."""
+    names = ("start tree", "goal tree") if len(trees) == 2 else tuple(f"tree {i + 1}" for i in range(len(trees)))
+    for i, (nodes, parents) in enumerate(trees):
+        segs = _tree_segments(nodes, parents)
+        color = C_TREES[i % len(C_TREES)]
+        if len(segs):
+            ax.add_collection(LineCollection(list(segs), colors=color, linewidths=0.6, alpha=0.8, zorder=2))
+        # a proxy line carries the legend entry (LineCollection legends look odd)
+        ax.plot([], [], color=color, lw=1.0, label=f"{names[i]} ({len(np.asarray(nodes))} nodes)")
+
+
+def _draw_observation(ax: Axes, observation: Array, robot: Robot | None, start: Array, size: float) -> None:
+    """Observed points (and normals as short arrows), back in the world frame."""
+    pts, nrm = _observation_to_world(observation, robot, start)
+    what = "observed points + normals" if nrm is not None else "observed points"
+    ax.scatter(pts[:, 0], pts[:, 1], s=9, c=C_OBS_POINTS, lw=0, zorder=4, label=f"{what} ({len(pts)})")
+    if nrm is not None:
+        ax.quiver(
+            pts[:, 0],
+            pts[:, 1],
+            nrm[:, 0],
+            nrm[:, 1],
+            angles="xy",
+            scale_units="xy",
+            scale=1.0 / (0.035 * size),
+            width=0.003,
+            headwidth=3.5,
+            headlength=4,
+            headaxislength=3.5,
+            color=C_OBS_POINTS,
+            alpha=0.8,
+            zorder=4,
+        )
+
+
+def _draw_paths(ax: Axes, raw: Any, final: Array | None) -> None:
+    """The raw (unsmoothed) path when it differs, then the final path with its nodes."""
+    if raw is not None and len(raw):
+        raw = np.asarray(raw, np.float64)
+        if final is None or raw.shape != final.shape or not np.allclose(raw, final):
+            ax.plot(raw[:, 0], raw[:, 1], ls="--", lw=1.0, color=C_RAW, zorder=3, label="raw path")
+    if final is not None:
+        ax.plot(final[:, 0], final[:, 1], "-", lw=2.5, color=C_PATH, zorder=5, solid_capstyle="round", label="path")
+        ax.plot(final[:, 0], final[:, 1], "o", ms=3.5, mfc="white", mec=C_PATH, mew=1.0, zorder=5, label="_nolegend_")
+
+
 def draw_problem(
     ax: Axes,
     problem: Problem,
@@ -191,52 +241,19 @@ def draw_problem(
     low, high = scene.low, scene.high
 
     # bounds (drawn unclipped so that the whole frame line shows at the axes limits)
-    ax.add_patch(
-        Rectangle(tuple(low), *(high - low), fill=False, ec=C_BOUNDS, lw=1.5, zorder=8, clip_on=False, label="_nolegend_")
-    )
+    ax.add_patch(Rectangle(tuple(low), *(high - low), fill=False, ec=C_BOUNDS, lw=1.5, zorder=8, clip_on=False, label="_nolegend_"))
     _draw_obstacles(ax, scene)
 
-    # search trees: one LineCollection per tree
     if show_trees and result is not None:
-        trees = getattr(result, "trees", None) or []
-        names = ("start tree", "goal tree") if len(trees) == 2 else tuple(f"tree {i + 1}" for i in range(len(trees)))
-        for i, (nodes, parents) in enumerate(trees):
-            segs = _tree_segments(nodes, parents)
-            color = C_TREES[i % len(C_TREES)]
-            if len(segs):
-                ax.add_collection(LineCollection(segs, colors=color, linewidths=0.6, alpha=0.8, zorder=2))
-            # a proxy line carries the legend entry (LineCollection legends look odd)
-            ax.plot([], [], color=color, lw=1.0, label=f"{names[i]} ({len(np.asarray(nodes))} nodes)")
+        _draw_trees(ax, getattr(result, "trees", None) or [])
 
-    # observed points, back in the world frame
     if observation is not None:
-        pts, nrm = _observation_to_world(observation, robot, problem.start)
-        what = "observed points + normals" if nrm is not None else "observed points"
-        ax.scatter(pts[:, 0], pts[:, 1], s=9, c=C_OBS_POINTS, lw=0, zorder=4, label=f"{what} ({len(pts)})")
-        if nrm is not None:
-            size = float(np.max(high - low))
-            ax.quiver(
-                pts[:, 0], pts[:, 1], nrm[:, 0], nrm[:, 1],
-                angles="xy", scale_units="xy", scale=1.0 / (0.035 * size),
-                width=0.003, headwidth=3.5, headlength=4, headaxislength=3.5,
-                color=C_OBS_POINTS, alpha=0.8, zorder=4,
-            )
+        _draw_observation(ax, observation, robot, problem.start, float(np.max(high - low)))
 
-    # raw (unsmoothed) path, then the final path
-    raw = getattr(result, "raw_path", None) if result is not None else None
-    final = _path_of(result, path)
-    if raw is not None and len(raw):
-        raw = np.asarray(raw, np.float64)
-        if final is None or raw.shape != final.shape or not np.allclose(raw, final):
-            ax.plot(raw[:, 0], raw[:, 1], ls="--", lw=1.0, color=C_RAW, zorder=3, label="raw path")
-    if final is not None:
-        ax.plot(final[:, 0], final[:, 1], "-", lw=2.5, color=C_PATH, zorder=5, solid_capstyle="round", label="path")
-        ax.plot(final[:, 0], final[:, 1], "o", ms=3.5, mfc="white", mec=C_PATH, mew=1.0, zorder=5, label="_nolegend_")
+    _draw_paths(ax, getattr(result, "raw_path", None) if result is not None else None, _path_of(result, path))
 
     # start and goal on top
-    ax.add_patch(
-        Circle(tuple(problem.goal[:2]), goal_tolerance, fill=False, ec=C_GOAL, lw=1.0, ls="--", zorder=6, label="_nolegend_")
-    )
+    ax.add_patch(Circle(tuple(problem.goal[:2]), goal_tolerance, fill=False, ec=C_GOAL, lw=1.0, ls="--", zorder=6, label="_nolegend_"))
     _robot_patches(ax, robot, problem.start, C_START, "start")
     if robot is not None and robot.config_dim == robot.dim:
         _robot_patches(ax, robot, problem.goal, C_GOAL, "_nolegend_")
@@ -375,11 +392,21 @@ def render_grid(
             key = lab.split(" (")[0]  # one entry per kind, without per-problem counts
             if key not in legend:
                 if isinstance(h, Line2D):
-                    h = Line2D([], [], color=h.get_color(), ls=h.get_linestyle(), lw=h.get_linewidth(),
-                               marker=h.get_marker(), ms=h.get_markersize(), mfc=h.get_markerfacecolor(),
-                               mec=h.get_markeredgecolor())
+                    h = Line2D(
+                        [],
+                        [],
+                        color=h.get_color(),
+                        ls=h.get_linestyle(),
+                        lw=h.get_linewidth(),
+                        marker=h.get_marker(),
+                        ms=h.get_markersize(),
+                        mfc=h.get_markerfacecolor(),
+                        mec=h.get_markeredgecolor(),
+                    )
                 legend[key] = h
-    fig.legend(list(legend.values()), list(legend.keys()), loc="outside lower center", ncols=min(len(legend), _legend_columns(ncols)), fontsize=8, frameon=False)
+    fig.legend(
+        list(legend.values()), list(legend.keys()), loc="outside lower center", ncols=min(len(legend), _legend_columns(ncols)), fontsize=8, frameon=False
+    )
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from matplotlib.animation import PillowWriter
@@ -124,7 +124,7 @@ def _box_faces(center: Array, rotation: Array, half: Array) -> Array:
     return corners[idx]
 
 
-def _revolution(radii: Sequence[float], zs: Sequence[float], center: Array, rotation: Array, n: int = N_AROUND) -> Array:
+def _revolution(radii: Sequence[float] | Array, zs: Sequence[float] | Array, center: Array, rotation: Array, n: int = N_AROUND) -> Array:
     """Quads ``(F, 4, 3)`` of the surface swept by the profile ``(radius, z)`` (rows, in
     order) around the local z axis, placed in the world by ``rotation`` and ``center``.
     A row of radius 0 collapses to a point (caps, apexes and poles)."""
@@ -325,7 +325,9 @@ def _robot_faces(robot: Robot, q: Array) -> tuple[Array, Array, Array]:
     return np.concatenate(faces), np.concatenate(normals), np.concatenate(boxy)
 
 
-def _draw_robot(ax: Axes3D, robot: Robot, q: Array, color: Any, alpha: float, zorder: float = _Z["robot"], edge: Any = "black", label: str = "_nolegend_") -> Poly3DCollection:
+def _draw_robot(
+    ax: Axes3D, robot: Robot, q: Array, color: Any, alpha: float, zorder: float = _Z["robot"], edge: Any = "black", label: str = "_nolegend_"
+) -> Poly3DCollection:
     faces, normals, boxy = _robot_faces(robot, q)
     fc = _shade(color, normals, alpha)
     ec = np.zeros((len(faces), 4))
@@ -345,7 +347,9 @@ def _draw_points(ax: Axes3D, points: Array, normals: Array | None, low: Array, h
         lines = Line3DCollection(segs, colors=C_POINTS, linewidths=0.8, alpha=0.9, zorder=_Z["points"])
         ax.add_collection3d(lines)
         out.append(lines)
-    out.append(ax.scatter(points[:, 0], points[:, 1], points[:, 2], s=7, c=C_POINTS, edgecolors="#8a4a0b", linewidths=0.3, depthshade=False, zorder=_Z["points"]))
+    out.append(
+        ax.scatter(points[:, 0], points[:, 1], points[:, 2], s=7, c=C_POINTS, edgecolors="#8a4a0b", linewidths=0.3, depthshade=False, zorder=_Z["points"])
+    )
     return out
 
 
@@ -430,7 +434,19 @@ def draw_robot_3d(ax: Axes3D, robot: Robot, q: Any, color: Any, alpha: float) ->
     _draw_robot(ax, robot, np.asarray(q, np.float64), color, alpha)
 
 
-def _draw_problem(ax: Axes3D, problem: Problem, robot: Robot, path: Array | None, points: Any, normals: Any, title: str | None, obstacles: Sequence[Shape] | None, elev: float, azim: float, fontsize: float = 9) -> None:
+def _draw_problem(
+    ax: Axes3D,
+    problem: Problem,
+    robot: Robot,
+    path: Array | None,
+    points: Any,
+    normals: Any,
+    title: str | None,
+    obstacles: Sequence[Shape] | None,
+    elev: float,
+    azim: float,
+    fontsize: float = 9,
+) -> None:
     scene = problem.scene
     draw_scene_3d(ax, scene.obstacles if obstacles is None else obstacles, scene.low, scene.high)
     if points is not None:
@@ -467,7 +483,9 @@ def render_problem_3d(
     fig = _new_figure(figsize)
     ax = fig.add_axes((0.0, 0.07, 1.0, 0.88), projection="3d")
     _draw_problem(ax, problem, robot, p, points, normals, title, obstacles, elev, azim)
-    fig.legend(handles=_legend_handles(points is not None, p is not None), loc="lower center", ncols=5, fontsize=8, frameon=False, handlelength=1.5, columnspacing=1.2)
+    fig.legend(
+        handles=_legend_handles(points is not None, p is not None), loc="lower center", ncols=5, fontsize=8, frameon=False, handlelength=1.5, columnspacing=1.2
+    )
     _save(fig, output)
     return fig
 
@@ -500,7 +518,7 @@ def render_grid_3d(
     for i, pr in enumerate(problems):
         r, c = divmod(i, cols)
         rect = (c / cols, (legend_h + (rows - 1 - r) * GRID_CELL) / height, 1.0 / cols, 0.94 * GRID_CELL / height)
-        ax = fig.add_axes(rect, projection="3d")
+        ax = cast(Axes3D, fig.add_axes(rect, projection="3d"))
         p = _as_path(paths[i], robot) if paths is not None else None
         any_path |= p is not None
         title = titles[i] if titles is not None else (_title_of(pr) or f"problem {i}")
@@ -535,7 +553,7 @@ def render_rollout_gif(
     scene = problem.scene
     low, high = scene.low, scene.high
     fig = _new_figure((5.0, 5.0), GIF_DPI)
-    ax = fig.add_axes((0.0, 0.07, 1.0, 0.86), projection="3d")
+    ax = cast(Axes3D, fig.add_axes((0.0, 0.07, 1.0, 0.86), projection="3d"))
     draw_scene_3d(ax, [] if obstacles_at is not None else scene.obstacles, low, high)
     ax.view_init(elev=elev, azim=azim)
     _draw_endpoints(ax, robot, None, problem.goal)
@@ -543,7 +561,7 @@ def render_rollout_gif(
     name = _title_of(problem)
     out = Path(output)
     out.parent.mkdir(parents=True, exist_ok=True)
-    writer = PillowWriter(fps=fps)
+    writer = PillowWriter(fps=fps)  # type: ignore[arg-type]  # (any number works; the stubs say int)
     moving: list[Any] = []
     with writer.saving(fig, str(out), dpi=GIF_DPI):
         for t, q in enumerate(p):

@@ -168,139 +168,27 @@ def view_problem(
         import viser
     except ImportError:
         raise ImportError(VIEWER_MISSING) from None
-    from ..evaluation.evaluate import timed_path
 
     scene = problem.scene
     if scene.dim != 3:
         raise ValueError(f"the viewer shows 3D scenes, this one is {scene.dim}D (use pointplan.viz.plot2d)")
-    body = robot_mesh(robot)
-    timed: Array
-    if path is not None and len(np.asarray(path)):
-        p = np.asarray(path, np.float64)
-        if p.ndim != 2 or p.shape[1] != robot.config_dim:
-            raise ValueError(f"a path for {robot.name} must be a (K, {robot.config_dim}) array, got shape {p.shape}")
-        timed = timed_path(robot, p)
-    else:
-        timed = np.asarray(problem.start, np.float64).reshape(1, robot.config_dim)
-    n_steps = len(timed)
-    low, high = scene.low, scene.high
-    extent = float(np.max(high - low))
-
+    timed = _timed_configs(problem, robot, path)
     server = viser.ViserServer(host=host, port=port, verbose=False)
     try:  # a failure while filling the scene must not leave the server running
-        server.scene.set_up_direction("+z")
-        centre = (low + high) / 2.0
-        server.initial_camera.look_at = tuple(centre)
-        server.initial_camera.position = tuple(centre + np.array([-1.2, -1.6, 1.1]) * extent)
-
-        server.scene.add_line_segments("/bounds", _bounds_segments(low, high), _rgb255(C_BOUNDS), thickness=1.5, thickness_units="screen")
-
-        # ------------------------------------------------------------ obstacles
-        obstacle_color = _rgb255(C_OBSTACLE)
-        handles: dict[str, Any] = {"obstacles": [], "obstacle_faces": []}
-
-        def draw_obstacles(obstacles: Sequence[Shape]) -> None:
-            meshes = scene_meshes(obstacles)
-            old = handles["obstacles"]
-            same = len(old) == len(meshes) and all(np.array_equal(f, m.faces) for f, m in zip(handles["obstacle_faces"], meshes))
-            if same:  # moving obstacles: only the vertices change
-                for h, m in zip(old, meshes):
-                    h.vertices = np.asarray(m.vertices, np.float32)
-                return
-            for h in old:
-                h.remove()
-            handles["obstacles"] = [
-                server.scene.add_mesh_simple(
-                    f"/obstacles/{k}",
-                    np.asarray(m.vertices),
-                    np.asarray(m.faces),
-                    color=obstacle_color,
-                    opacity=OBSTACLE_OPACITY,
-                    flat_shading=True,
-                    side="double",
-                    cast_shadow=False,
-                    receive_shadow=False,
-                )
-                for k, m in enumerate(meshes)
-            ]
-            handles["obstacle_faces"] = [np.array(m.faces) for m in meshes]
-
-        draw_obstacles(scene.obstacles_at(0))
-        clouds = [s for s in scene.obstacles if isinstance(s, PointCloud)]
-        for k, s in enumerate(clouds):
-            if s.dim == 3 and len(s.points):
-                server.scene.add_point_cloud(f"/obstacle_points/{k}", np.asarray(s.points), _rgb255(C_OBSTACLE_EDGE), point_size=0.006 * extent, precision="float32")
-
-        # ------------------------------------------------------------ start, goal, path
-        def add_body(name: str, q: Array, color: str, opacity: float | None) -> Any:
-            pos, wxyz = robot_pose(robot, q)
-            frame = server.scene.add_frame(name, show_axes=False, position=pos, wxyz=wxyz)
-            server.scene.add_mesh_simple(f"{name}/body", np.asarray(body.vertices), np.asarray(body.faces), color=_rgb255(color), opacity=opacity, flat_shading=True)
-            return frame
-
-        add_body("/start", problem.start, C_START, ENDPOINT_OPACITY)
-        add_body("/goal", problem.goal, C_GOAL, ENDPOINT_OPACITY)
-        if n_steps > 1:
-            pos = robot.positions(timed)
-            server.scene.add_line_segments("/path", np.stack([pos[:-1], pos[1:]], 1), _rgb255(C_PATH), thickness=3.0, thickness_units="screen")
-
-        # ------------------------------------------------------------ moving robot and GUI
-        robot_frame = add_body("/robot", timed[0], C_START, None)
-        points_handle = server.scene.add_point_cloud("/points", np.zeros((1, 3)), _rgb255(C_POINTS), point_size=0.008 * extent, precision="float32", point_shape="circle", visible=False)
-
-        title = problem.tag or scene.name or "problem"
-        server.gui.add_markdown(f"**{title}**  \n{robot.name}, {n_steps} time step{'s' if n_steps != 1 else ''}" + ("  \nmoving obstacles" if scene.dynamic else ""))
-        slider = server.gui.add_slider("time step", min=0, max=max(n_steps - 1, 0), step=1, initial_value=0, disabled=n_steps < 2)
-        play = server.gui.add_checkbox("play", initial_value=False, disabled=n_steps < 2)
-        lock = threading.Lock()
-
-        def show_step(t: int) -> None:
-            t = int(np.clip(t, 0, n_steps - 1))
-            with lock:
-                pos, wxyz = robot_pose(robot, timed[t])
-                robot_frame.position = pos
-                robot_frame.wxyz = wxyz
-                if scene.dynamic:
-                    draw_obstacles(scene.obstacles_at(t))
-                if points_at is not None:
-                    pts = _as_points(points_at(t))
-                    if len(pts):
-                        points_handle.points = pts.astype(np.float32)
-                    points_handle.visible = bool(len(pts))
-
-        slider.on_update(lambda _event: show_step(int(slider.value)))
-        show_step(0)
-
-        # playing: a daemon thread advances the slider while the box is ticked; it ends when
-        # the server is stopped (server.stop is wrapped to tell it)
-        stopped = threading.Event()
-
-        def player() -> None:
-            while not stopped.wait(1.0 / PLAY_FPS):
-                if play.value and n_steps > 1:
-                    slider.value = (int(slider.value) + 1) % n_steps
-
-        thread = threading.Thread(target=player, name="pointplan-viewer-play", daemon=True)
-        thread.start()
-        viser_stop = server.stop
-
-        def stop() -> None:
-            stopped.set()
-            # viser registered its own stop with atexit and unregisters ``self.stop``, which
-            # is now this function: unregister the original here
-            atexit.unregister(viser_stop)
-            viser_stop()
-            thread.join(timeout=2.0)
-
-        server.stop = stop  # type: ignore[method-assign]
-        handles.update(slider=slider, play=play, robot=robot_frame, points=points_handle, timed=timed, show_step=show_step)
+        handles = _fill_scene(server, problem, robot, timed)
+        handles.update(_add_controls(server, problem, robot, timed, handles, points_at))
         server.pointplan = handles  # type: ignore[attr-defined]
     except BaseException:
         server.stop()
         raise
 
     shown = "localhost" if host in ("0.0.0.0", "::", "") else host
-    print(f"pointplan viewer: open http://{shown}:{server.get_port()}  ({n_steps} time steps; Ctrl-C to stop)" if block else f"pointplan viewer: open http://{shown}:{server.get_port()}", flush=True)
+    print(
+        f"pointplan viewer: open http://{shown}:{server.get_port()}  ({len(timed)} time steps; Ctrl-C to stop)"
+        if block
+        else f"pointplan viewer: open http://{shown}:{server.get_port()}",
+        flush=True,
+    )
     if not block:
         return server
     try:
@@ -311,3 +199,144 @@ def view_problem(
     finally:
         server.stop()
     return server
+
+
+def _timed_configs(problem: Problem, robot: Robot, path: Any) -> Array:
+    """The configurations per time step of ``path`` (the start alone without a path)."""
+    from ..evaluation.evaluate import timed_path
+
+    if path is not None and len(np.asarray(path)):
+        p = np.asarray(path, np.float64)
+        if p.ndim != 2 or p.shape[1] != robot.config_dim:
+            raise ValueError(f"a path for {robot.name} must be a (K, {robot.config_dim}) array, got shape {p.shape}")
+        return timed_path(robot, p)
+    return np.asarray(problem.start, np.float64).reshape(1, robot.config_dim)
+
+
+def _obstacle_drawer(server: Any, handles: dict[str, Any]) -> Callable[[Sequence[Shape]], None]:
+    """A function drawing obstacles as meshes (moving ones: only their vertices change)."""
+    obstacle_color = _rgb255(C_OBSTACLE)
+
+    def draw_obstacles(obstacles: Sequence[Shape]) -> None:
+        meshes = scene_meshes(obstacles)
+        old = handles["obstacles"]
+        same = len(old) == len(meshes) and all(np.array_equal(f, m.faces) for f, m in zip(handles["obstacle_faces"], meshes))
+        if same:
+            for h, m in zip(old, meshes):
+                h.vertices = np.asarray(m.vertices, np.float32)
+            return
+        for h in old:
+            h.remove()
+        handles["obstacles"] = [
+            server.scene.add_mesh_simple(
+                f"/obstacles/{k}",
+                np.asarray(m.vertices),
+                np.asarray(m.faces),
+                color=obstacle_color,
+                opacity=OBSTACLE_OPACITY,
+                flat_shading=True,
+                side="double",
+                cast_shadow=False,
+                receive_shadow=False,
+            )
+            for k, m in enumerate(meshes)
+        ]
+        handles["obstacle_faces"] = [np.array(m.faces) for m in meshes]
+
+    return draw_obstacles
+
+
+def _add_body(server: Any, robot: Robot, name: str, q: Array, color: str, opacity: float | None) -> Any:
+    body = robot_mesh(robot)
+    pos, wxyz = robot_pose(robot, q)
+    frame = server.scene.add_frame(name, show_axes=False, position=pos, wxyz=wxyz)
+    server.scene.add_mesh_simple(f"{name}/body", np.asarray(body.vertices), np.asarray(body.faces), color=_rgb255(color), opacity=opacity, flat_shading=True)
+    return frame
+
+
+def _fill_scene(server: Any, problem: Problem, robot: Robot, timed: Array) -> dict[str, Any]:
+    """Camera, bounds, obstacles, start, goal, path, the moving robot and its points."""
+    scene = problem.scene
+    low, high = scene.low, scene.high
+    extent = float(np.max(high - low))
+    server.scene.set_up_direction("+z")
+    centre = (low + high) / 2.0
+    server.initial_camera.look_at = tuple(centre)
+    server.initial_camera.position = tuple(centre + np.array([-1.2, -1.6, 1.1]) * extent)
+    server.scene.add_line_segments("/bounds", _bounds_segments(low, high), _rgb255(C_BOUNDS), thickness=1.5, thickness_units="screen")
+    handles: dict[str, Any] = {"obstacles": [], "obstacle_faces": []}
+    handles["draw_obstacles"] = draw_obstacles = _obstacle_drawer(server, handles)
+    draw_obstacles(scene.obstacles_at(0))
+    clouds = [s for s in scene.obstacles if isinstance(s, PointCloud)]
+    for k, s in enumerate(clouds):
+        if s.dim == 3 and len(s.points):
+            server.scene.add_point_cloud(
+                f"/obstacle_points/{k}", np.asarray(s.points), _rgb255(C_OBSTACLE_EDGE), point_size=0.006 * extent, precision="float32"
+            )
+    _add_body(server, robot, "/start", problem.start, C_START, ENDPOINT_OPACITY)
+    _add_body(server, robot, "/goal", problem.goal, C_GOAL, ENDPOINT_OPACITY)
+    if len(timed) > 1:
+        pos = robot.positions(timed)
+        server.scene.add_line_segments("/path", np.stack([pos[:-1], pos[1:]], 1), _rgb255(C_PATH), thickness=3.0, thickness_units="screen")
+    handles["robot"] = _add_body(server, robot, "/robot", timed[0], C_START, None)
+    handles["points"] = server.scene.add_point_cloud(
+        "/points", np.zeros((1, 3)), _rgb255(C_POINTS), point_size=0.008 * extent, precision="float32", point_shape="circle", visible=False
+    )
+    return handles
+
+
+def _add_controls(server: Any, problem: Problem, robot: Robot, timed: Array, handles: dict[str, Any], points_at: Callable[[int], Any] | None) -> dict[str, Any]:
+    """The title, the time-step slider and the play box; the step shown follows the slider."""
+    scene, n_steps = problem.scene, len(timed)
+    robot_frame, points_handle = handles["robot"], handles["points"]
+    title = problem.tag or scene.name or "problem"
+    server.gui.add_markdown(
+        f"**{title}**  \n{robot.name}, {n_steps} time step{'s' if n_steps != 1 else ''}" + ("  \nmoving obstacles" if scene.dynamic else "")
+    )
+    slider = server.gui.add_slider("time step", min=0, max=max(n_steps - 1, 0), step=1, initial_value=0, disabled=n_steps < 2)
+    play = server.gui.add_checkbox("play", initial_value=False, disabled=n_steps < 2)
+    lock = threading.Lock()
+
+    def show_step(t: int) -> None:
+        t = int(np.clip(t, 0, n_steps - 1))
+        with lock:
+            pos, wxyz = robot_pose(robot, timed[t])
+            robot_frame.position = pos
+            robot_frame.wxyz = wxyz
+            if scene.dynamic:
+                handles["draw_obstacles"](scene.obstacles_at(t))
+            if points_at is not None:
+                pts = _as_points(points_at(t))
+                if len(pts):
+                    points_handle.points = pts.astype(np.float32)
+                points_handle.visible = bool(len(pts))
+
+    slider.on_update(lambda _event: show_step(int(slider.value)))
+    show_step(0)
+    _start_player(server, slider, play, n_steps)
+    return {"slider": slider, "play": play, "timed": timed, "show_step": show_step}
+
+
+def _start_player(server: Any, slider: Any, play: Any, n_steps: int) -> None:
+    """A daemon thread advances the slider while ``play`` is ticked; it ends when the server
+    is stopped (``server.stop`` is wrapped to tell it)."""
+    stopped = threading.Event()
+
+    def player() -> None:
+        while not stopped.wait(1.0 / PLAY_FPS):
+            if play.value and n_steps > 1:
+                slider.value = (int(slider.value) + 1) % n_steps
+
+    thread = threading.Thread(target=player, name="pointplan-viewer-play", daemon=True)
+    thread.start()
+    viser_stop = server.stop
+
+    def stop() -> None:
+        stopped.set()
+        # viser registered its own stop with atexit and unregisters ``self.stop``, which
+        # is now this function: unregister the original here
+        atexit.unregister(viser_stop)
+        viser_stop()
+        thread.join(timeout=2.0)
+
+    server.stop = stop

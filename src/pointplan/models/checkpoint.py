@@ -11,7 +11,7 @@ unpickling a file can run anything.
 
 Format version 2 is the data-only format. Version 1 files that are data only load as they
 are; older files holding pickled objects are refused, naming ``pointplan convert-checkpoint``
-(``pointplan.learning.convert``), the one place that unpickles a file, on request.
+(``pointplan.models.convert``), the one place that unpickles a file, on request.
 ``check_compatible`` refuses an environment whose robot or observation differs.
 """
 

@@ -1,0 +1,1 @@
+"""Training: SAC + HER, hindsight replay, behavioural cloning, DAgger, the training loop."""

@@ -1,0 +1,1 @@
+"""Networks and the inference policy: encoders, actor and critics, checkpoint I/O."""

@@ -1,0 +1,82 @@
+"""The viewer as a web page: `pointplan view` loaded in headless Chromium.
+
+Skipped where Chromium or viser is missing (`.ci/run` installs Chromium on CI when it can).
+The page is given virtual time to load its scripts and receive the scene over the
+websocket; the DOM then holds the control panel and the scene's canvas, and a screenshot
+shows both.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("viser")
+CHROMIUM = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None)
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(CHROMIUM is None, reason="no Chromium (apt-get install chromium)")]
+SRC = Path(__file__).resolve().parents[1] / "src"
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def viewer_url():  # type: ignore[no-untyped-def]
+    port = _free_port()
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pointplan", "view", "--env", "boxes3d", "--robot", "sshape", "--port", str(port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
+    lines: list[str] = []
+    threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")), daemon=True).start()  # type: ignore[union-attr]
+    deadline = time.monotonic() + 180
+    while not any("open http" in x for x in lines):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            pytest.fail("pointplan view did not start:\n" + "".join(lines))
+        time.sleep(0.2)
+    yield f"http://127.0.0.1:{port}"
+    proc.send_signal(signal.SIGINT)  # the viewer stops its server on Ctrl-C
+    try:
+        proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
+def _chromium(url: str, *args: str) -> subprocess.CompletedProcess[str]:
+    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--enable-unsafe-swiftshader", "--window-size=1000,700", "--virtual-time-budget=10000", *args, url]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=120)  # type: ignore[arg-type]
+
+
+def test_the_page_shows_the_scene_and_the_time_step_controls(viewer_url: str, tmp_path: Path) -> None:
+    dom = _chromium(viewer_url, "--dump-dom").stdout
+    assert "<canvas" in dom  # the 3D scene
+    assert "boxes3d/test/0/seed0" in dom and "sshape" in dom  # the title in the control panel
+    assert "time step" in dom and "play" in dom  # the slider and the play box
+    shot = tmp_path / "view.png"
+    _chromium(viewer_url, f"--screenshot={shot}")
+    from matplotlib.image import imread
+
+    img = imread(str(shot))[..., :3]
+    h, w = img.shape[:2]
+    panel = img[: h // 4, int(w * 0.62) :]  # the control panel sits top right
+    scene = img[h // 4 : 3 * h // 4, w // 4 : 3 * w // 4]
+    assert (panel.mean(-1) < 0.4).mean() > 0.005, "the control panel shows no text"
+    assert np.ptp(scene.reshape(-1, 3), axis=0).max() > 0.3, "the scene is blank"
