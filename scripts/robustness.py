@@ -132,9 +132,18 @@ def part_draws(sets: list[str], n: int, seed: int, obs_seeds: list[int], k: int,
             fails = [set(m["failed"]) for m in ms]
             flaky = len(set.union(*fails) - set.intersection(*fails))
             succ = [m["success_rate"] for m in ms]
-            res.setdefault(name, {})[label] = {"success": succ, "nodes": [m["nodes_mean"] for m in ms], "flaky": flaky, "failed": [sorted(f) for f in fails], "time_mean_s": [m["time_mean_s"] for m in ms]}
+            res.setdefault(name, {})[label] = {
+                "success": succ,
+                "nodes": [m["nodes_mean"] for m in ms],
+                "flaky": flaky,
+                "failed": [sorted(f) for f in fails],
+                "time_mean_s": [m["time_mean_s"] for m in ms],
+            }
             per = " / ".join(f"{s:.1%}" for s in succ)
-            print(f"| {name} | {label} | {per} | {np.mean(succ):.2%} | {np.mean([m['nodes_mean'] for m in ms]):.1f} | {flaky} | {1e3 * np.mean([m['time_mean_s'] for m in ms]):.1f} ms |", flush=True)
+            print(
+                f"| {name} | {label} | {per} | {np.mean(succ):.2%} | {np.mean([m['nodes_mean'] for m in ms]):.1f} | {flaky} | {1e3 * np.mean([m['time_mean_s'] for m in ms]):.1f} ms |",
+                flush=True,
+            )
 
 
 def main() -> int:

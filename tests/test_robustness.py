@@ -130,7 +130,11 @@ def test_policy_planner_options() -> None:
     base = [make_planner("policy", sc.robot).plan(p) for p in probs]
     k1 = [make_planner("policy", sc.robot, draws=1).plan(p) for p in probs]
     assert all(np.array_equal(a.path, b.path) for a, b in zip(base, k1))
-    for kw in ({"draws": 3}, {"observer_wrapper": perturbation(noise=0.002, drop=0.1, subset="fps")}, {"observer_wrapper": perturbation(viewpoint=(0.5, -0.5))}):
+    for kw in (
+        {"draws": 3},
+        {"observer_wrapper": perturbation(noise=0.002, drop=0.1, subset="fps")},
+        {"observer_wrapper": perturbation(viewpoint=(0.5, -0.5))},
+    ):
         planner = make_planner("policy", sc.robot, **kw)
         for p in probs:
             r = planner.plan(p)

@@ -186,8 +186,8 @@ def shipped_checkpoint(robot: str = "disc2d", observation: str | None = None) ->
     name = SHIPPED.get((robot, observation))
     path = Path(str(files("pointplan") / "data" / name)) if name else None
     if path is None or not path.is_file():
-        have = ", ".join(f"{r} with {o!r} points" for r, o in shipped_policies()) or "none"
+        shipped = ", ".join(f"{r} with {o!r} points" for r, o in shipped_policies()) or "none"
         raise ValueError(
-            f"no policy ships for robot {robot!r} with {observation!r} observations (shipped: {have}); pass --checkpoint PATH, or train one with `pointplan train`"
+            f"no policy ships for robot {robot!r} with {observation!r} observations (shipped: {shipped}); pass --checkpoint PATH, or train one with `pointplan train`"
         )
     return path
