@@ -501,15 +501,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         cfg = _resume_config(args)
         run_dir = args.run_dir or str(Path(args.resume).parent)  # the run's own folder
     else:
-        base = TrainConfig(
-            env=args.env,
-            robot=args.robot,
-            observation=_default_observation(args),
-            n_points=_default_points(args),
-            seed=args.seed,
-            device=args.device,
-            net=_net_config(args),
-        )
+        base = TrainConfig(**_learner_fields(args))
         cfg = replace_paths(base, given_options(args, TRAIN_OPTIONS))
         run_dir = args.run_dir or "runs/latest"
     scale = _scale(args)
@@ -559,15 +551,7 @@ def cmd_bc(args: argparse.Namespace) -> int:
         if args.dagger_rounds:
             cfg = dataclasses.replace(cfg, rounds=args.dagger_rounds)
     else:
-        bc = BCConfig(
-            env=args.env,
-            robot=args.robot,
-            observation=_default_observation(args),
-            n_points=_default_points(args),
-            seed=args.seed,
-            device=args.device,
-            net=_net_config(args),
-        )
+        bc = BCConfig(**_learner_fields(args))
         cfg = replace_paths(DaggerConfig(bc, rounds=args.dagger_rounds), given)
     if args.dagger_rounds or args.resume:
         run_dir = args.run_dir or (str(Path(args.resume).parent) if args.resume else "runs/latest")
@@ -587,6 +571,19 @@ def _bc_line(summary: dict[str, Any]) -> str:
             f"{summary['demo_time_s'] + summary['train_time_s']:.0f} s; checkpoint {summary['checkpoint']}"
         )
     return f"best validation success {summary['best_success']:.3f} with {summary['demo_steps']} demonstration steps, {summary['wall_time_s']:.0f} s; checkpoints in {summary['run_dir']}"
+
+
+def _learner_fields(args: argparse.Namespace) -> dict[str, Any]:
+    """The fields ``train`` and ``bc`` share: scenario, observation, seed, device, network."""
+    return {
+        "env": args.env,
+        "robot": args.robot,
+        "observation": _default_observation(args),
+        "n_points": _default_points(args),
+        "seed": args.seed,
+        "device": args.device,
+        "net": _net_config(args),
+    }
 
 
 def _default_observation(args: argparse.Namespace) -> str:
