@@ -80,14 +80,23 @@ def bench_eval(env: str, robot_name: str | None, episodes: int, workers: int, se
     return {"serial_s": t_serial, "cold_s": cold, "warm_s": warm, "ray_start_s": t_start, "identical": float(same)}
 
 
-def bench_train(env: str, steps: int, workers: int, updates_per_step: float = 0.5) -> None:
+def bench_train(env: str, steps: int, workers: int, updates_per_step: float = 0.5, robot: str | None = None, observation: str | None = None) -> None:
     from pointplan.learning.train import TrainConfig, train
     from pointplan.models.actor_critic import NetConfig
     from pointplan.models.encoders import EncoderConfig
 
     net = NetConfig(EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True)
     cfg = TrainConfig(
-        env=env, total_steps=steps, num_envs=8, eval_every=max(steps // 6, 500), eval_episodes=100, updates_per_step=updates_per_step, warmup_steps=500, net=net
+        env=env,
+        robot=robot,
+        observation=observation or ("local" if robot else "surface-normals"),
+        total_steps=steps,
+        num_envs=8,
+        eval_every=max(steps // 6, 500),
+        eval_episodes=100,
+        updates_per_step=updates_per_step,
+        warmup_steps=500,
+        net=net,
     )
     runs = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -115,6 +124,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--train-env", default="empty2d")
+    ap.add_argument("--train-robot", help="robot of a 3D training scenario (sphere3d or sshape; its observation is `local`)")
     ap.add_argument("--train-steps", type=int, default=6000, help="0 skips the training part")
     ap.add_argument("--train-updates-per-step", type=float, default=0.5, help="gradient steps per env step (default: %(default)s, as in docs/learning.md)")
     args = ap.parse_args()
@@ -122,7 +132,7 @@ def main() -> None:
     if args.episodes > 0:
         bench_eval(args.env, args.robot, args.episodes, args.workers, args.seed, args.max_nodes)
     if args.train_steps > 0:
-        bench_train(args.train_env, args.train_steps, args.workers, args.train_updates_per_step)
+        bench_train(args.train_env, args.train_steps, args.workers, args.train_updates_per_step, args.train_robot)
     print(load())
 
 
