@@ -8,8 +8,13 @@ of them alike) and every path is re-checked by ``check_path``.
 
 Planners (``--planners``, comma separated):
 
-- ``policy``: ``make_planner("policy", robot).plan`` (the batch-1 path: numpy network,
-  no batched core; paths end at the goal when the last connection is free).
+- ``policy``: ``make_planner("policy", robot).plan`` (the batch-1 path: for the disc among
+  boxes one compiled call per problem (network, motion checks, the greedy goal test); paths
+  end at the goal as soon as the certified straight edge to it is free).
+- ``policy-python``: the same rollout without the compiled kernel (``compiled=False``:
+  numpy network, one batched ``q_free`` call per run ahead).
+- ``policy-nogreedy``: ``greedy_goal=False``: the rollout to the goal tolerance, then the
+  last edge (the planner before the greedy goal test).
 - ``policy-before``: the per-problem path as it was before: ``rollout_batch`` with one
   problem, the network in PyTorch with its default thread count (``--torch-threads``
   changes that), no connection to the goal.
@@ -180,6 +185,14 @@ class PolicyBefore:
 def build(name: str, robot: Any, args: argparse.Namespace) -> Any:
     if name == "policy":
         return make_planner("policy", robot)
+    if name == "policy-python":
+        pl = make_planner("policy", robot, compiled=False)
+        pl.name = name
+        return pl
+    if name == "policy-nogreedy":
+        pl = make_planner("policy", robot, greedy_goal=False)
+        pl.name = name
+        return pl
     if name == "policy-before":
         return PolicyBefore(robot, args.torch_threads)
     if name == "ompl":
@@ -195,6 +208,54 @@ def build(name: str, robot: Any, args: argparse.Namespace) -> Any:
     if name == "hybrid":
         return make_planner("hybrid", robot, seed=0)
     raise SystemExit(f"unknown planner {name!r}")
+
+
+def step_parts(planner: Any, problems: list[Problem], reps: int = 200) -> dict[str, float]:
+    """Latency of the parts of one compiled policy step, each run ``reps`` times in a
+    compiled loop at the problems' starts (median over the problems, us): the point
+    draw, the network, ``q_free``'s move and the goal edge's quick test and certified
+    check."""
+    import numba
+
+    from pointplan.planners import _policy_kernels as K
+
+    @numba.njit
+    def loop(kind, reps, q, goal, u, count, n_points, idx, table, s32, wflat, layout, scale, low, high, bc, br, bh, h, y, tmp, ki, tw, nq):  # type: ignore[no-untyped-def]
+        for _ in range(reps):
+            if kind == 0:
+                K._select(u, count, n_points, idx)
+            elif kind == 1:
+                K._action(q, goal, idx, table, s32, wflat, layout, scale, 2, h, y, tmp, ki)
+            elif kind == 2:
+                K._q_free(q, tw, 0.01, low, high, bc, br, bh, 0.01, True, nq)
+            elif kind == 3:
+                K._segment_hits(q, goal, 0.01 * (1 - 1e-9), 0.01, bc, br, bh)
+            else:
+                K._edge_free(q, goal, 0.01, 0.01, low, high, bc, br, bh)
+
+    (wflat, layout), scale, fparams, iparams = planner._net
+    n_points, width = int(iparams[K.I_N_POINTS]), int(layout[0])
+    names = ("point draw", "network", "move (q_free)", "goal quick test", "goal certified check")
+    out: dict[str, list[float]] = {k: [] for k in names}
+    for p in problems:
+        planner._observer.set_scene(0, p.scene)
+        pts, nrm, boxes = planner._scene_inputs(p.scene)
+        count = len(pts)
+        u = planner._uniforms(count + n_points)[: count + n_points]
+        idx = np.empty(n_points, np.int64)
+        K._select(u, count, n_points, idx)
+        s32 = float(fparams[K.F_S32])
+        table = K._table(pts, nrm, s32, wflat, layout)
+        h, y = np.empty((n_points, width), np.float32), np.empty((n_points, width), np.float32)
+        tmp, ki = np.empty(n_points * width, np.float32), np.empty(n_points * width, np.int32)
+        tw, nq = np.array([0.05, 0.05]), np.empty(2)
+        for kind, name in enumerate(names):
+            args = (p.start, p.goal, u, count, n_points, idx, table, s32, wflat, layout, scale, p.scene.low, p.scene.high, *boxes, h, y, tmp, ki, tw, nq)
+            loop(kind, 1, *args)
+            t = time.perf_counter()
+            loop(kind, reps, *args)
+            out[name].append((time.perf_counter() - t) / reps * 1e6)
+    return {k: float(np.median(v)) for k, v in out.items()}
 
 
 def fmt_ms(x: float) -> str:
@@ -226,14 +287,14 @@ def main() -> None:
         if hasattr(pl, "reset"):  # Bi-RRT: the same draws as `pointplan eval`
             pl.reset()
     rows: dict[str, dict[str, list[float]]] = {n: {"time": [], "cpu": [], "ok": [], "nodes": [], "checks": [], "length": []} for n in names}
-    split = {"observe": 0.0, "network": 0.0, "motion": 0.0, "steps": 0}
+    split = {"observe": 0.0, "network": 0.0, "motion": 0.0, "goal": 0.0, "compiled": 0.0, "steps": 0}
     scene_prep: list[float] = []
     gc.collect()
     gc.disable()  # no collector pauses inside a timed call
     try:
         for p in problems:
             for n, pl in planners.items():
-                if n == "policy":  # the observer's point set of a new scene, timed apart
+                if n in ("policy", "policy-python", "policy-nogreedy"):  # the observer's point set of a new scene, timed apart
                     t = time.perf_counter()
                     pl._observer.set_scene(0, p.scene)  # computes and caches the points
                     scene_prep.append(time.perf_counter() - t)
@@ -242,7 +303,7 @@ def main() -> None:
                 res = pl.plan(p)
                 dt = time.perf_counter() - t
                 dc = time.thread_time() - c
-                ok = len(res.path) > 0 and check_path(robot, p, res.path)
+                ok = len(res.path) > 0 and bool(check_path(robot, p, res.path))
                 r = rows[n]
                 r["time"].append(dt)
                 r["cpu"].append(dc)
@@ -252,7 +313,7 @@ def main() -> None:
                 r["length"].append(path_length(robot, res.path) + float(robot.distance(res.path[-1], p.goal)) if ok else math.nan)
                 if n == "policy" and "time_split" in res.info:
                     for k in split:
-                        split[k] += res.info["time_split"][k]
+                        split[k] += res.info["time_split"].get(k, 0.0)
             gc.collect()
     finally:
         gc.enable()
@@ -278,23 +339,34 @@ def main() -> None:
         if not sp or not sp["steps"] or name not in rows:
             continue
         s = sp["steps"]
-        total = sp["observe"] + sp["network"] + sp["motion"]
-        print(
-            f"{name} per step ({s} steps), wall: observation {1e6 * sp['observe'] / s:.1f} us, network {1e6 * sp['network'] / s:.1f} us, "
-            f"motion check {1e6 * sp['motion'] / s:.1f} us, rest {1e6 * (float(np.sum(rows[name]['time'])) - total) / s:.1f} us"
-        )
+        total = sp["observe"] + sp["network"] + sp["motion"] + sp.get("goal", 0.0) + sp.get("compiled", 0.0)
+        rest = 1e6 * (float(np.sum(rows[name]["time"])) - total) / s
+        if sp.get("compiled"):
+            print(
+                f"{name} per step ({s} steps), wall: compiled rollout (network, motion check, goal test) {1e6 * sp['compiled'] / s:.1f} us, rest {rest:.1f} us"
+            )
+        else:
+            print(
+                f"{name} per step ({s} steps), wall: observation {1e6 * sp['observe'] / s:.1f} us, network {1e6 * sp['network'] / s:.1f} us, "
+                f"motion check {1e6 * sp['motion'] / s:.1f} us, rest {rest:.1f} us"
+            )
     if split["steps"]:
         print(
-            "  (policy: the observation is folded into the network's input layer for the disc; motion check = the free-move ends "
-            "plus the one batched q_free call per run; rest = set-up, the goal connection, bookkeeping. "
+            "  (policy: one compiled call per problem for the disc among boxes (rest = the Python around it: set-up, result); "
             "policy-before: observation = BatchedCore.observe, motion check = BatchedCore.step with its q_free)"
         )
         print(
             f"policy scene preparation (the observer's point set of a new workspace, like the collision world untimed above): median {1e6 * float(np.median(scene_prep)):.0f} us"
         )
+        if "policy" in planners and getattr(planners["policy"], "_net", None) is not None:
+            for k, v in step_parts(planners["policy"], problems[: min(50, len(problems))]).items():
+                print(f"  policy step parts, median over calls (compiled, called from a compiled loop): {k} {v:.1f} us")
     for a, b in (
         ("policy", "ompl"),
         ("policy", "ompl-ref"),
+        ("policy-python", "ompl-ref"),
+        ("policy-nogreedy", "ompl-ref"),
+        ("policy", "policy-nogreedy"),
         ("policy", "birrt"),
         ("policy", "policy-before"),
         ("policy-before", "ompl-ref"),

@@ -55,7 +55,8 @@ def test_observe_one_is_observe_of_one(problems: list[Problem]) -> None:
         assert np.array_equal(a.observe(q[None], np.random.default_rng(9))[0], b.observe_one(q, u=np.random.default_rng(9).random(b.draws_one())))
 
 
-def test_plan_is_the_batched_rollout(problems: list[Problem], planner) -> None:  # type: ignore[no-untyped-def]
+def test_plan_is_the_batched_rollout(problems: list[Problem]) -> None:
+    planner = make_planner("policy", Narrow2DScenario().robot, greedy_goal=False)
     robot = planner.robot
     same = 0
     for p in problems:
@@ -70,6 +71,23 @@ def test_plan_is_the_batched_rollout(problems: list[Problem], planner) -> None: 
         assert a.collision_checks >= b.collision_checks
         assert {"observe", "network", "motion", "steps"} <= set(a.info["time_split"])
     assert same >= len(problems) - 1  # float32 round-off may part a rare failing rollout
+
+
+def test_greedy_goal_stops_the_same_rollout_early(problems: list[Problem], planner) -> None:  # type: ignore[no-untyped-def]
+    """With the greedy goal test (the default) the policy's steps are the first steps of
+    the rollout without it; a path that stops early ends with a certified edge to the goal."""
+    robot = planner.robot
+    plain = make_planner("policy", robot, greedy_goal=False)
+    shorter = 0
+    for p in problems:
+        g, r = planner.plan(p), plain.plan(p)
+        k = g.nodes + 1
+        assert g.nodes <= r.nodes or not r.success
+        np.testing.assert_allclose(g.path[:k], r.path[:k], atol=1e-5, rtol=0)
+        if g.info.get("greedy_goal"):
+            assert np.array_equal(g.path[-1], p.goal) and check_path(robot, p, g.path, tolerance=1e-9)
+        shorter += g.nodes < r.nodes
+    assert shorter >= len(problems) // 3
 
 
 def test_paths_end_at_the_goal_when_free(problems: list[Problem], planner) -> None:  # type: ignore[no-untyped-def]
@@ -151,7 +169,7 @@ def test_one_robot_rollout_in_3d_matches_the_batched_one(robot_name: str) -> Non
     torch.manual_seed(0)
     actor = Actor((64, 6), robot.twist_dim, robot.twist_dim, NetConfig(EncoderConfig("pointnet", 32, 2), head_width=32, head_layers=2))
     policy = Policy(actor, robot, {"observation": "global", "n_points": 64, "horizon": 12})
-    planner = PolicyPlanner(policy)
+    planner = PolicyPlanner(policy, greedy_goal=False)  # the rollout itself, to its end
     assert planner.fast is not None
     for i in range(2):
         p = scenario.problem("test", i, seed=0)

@@ -9,7 +9,11 @@ sub-configurations ``q_free`` checked, plus those of the final connection to the
 core: it steps one robot with the environment's own pieces (the observer's draws, the
 policy, ``q_free``), with the network in numpy when it is a PointNet
 (:class:`~pointplan.models.policy.NumpyPointNetActor`) and otherwise PyTorch on one thread.
-Its rollouts are those of ``rollout_batch`` with one problem.
+Its rollouts are those of ``rollout_batch`` with one problem. For a ball (disc, sphere)
+among boxes the whole rollout is one compiled call (:mod:`._policy_kernels`, same
+arithmetic; ``compiled=False`` keeps the Python path). With ``greedy_goal`` (the default)
+``plan`` stops at the first configuration from which the straight edge to the goal is
+certified free, and ends the path at the goal (``info["greedy_goal"]``).
 
 The environment stops a rollout anywhere within ``goal_tolerance`` of the goal. The
 planner then tries the last step to the goal itself (the geodesic from the policy's last
@@ -30,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from ..envs.core import BatchedCore, EnvConfig, q_free
+from ..geometry.shapes import Box
 from ..observers.base import PointSetObserver
 from ..robots.base import Robot
 from ..robots.point import Disc2D, Sphere3D
@@ -174,6 +179,46 @@ def rollout_batch(
     return results
 
 
+#: ``info["end"]`` of the compiled rollout's end codes (``_policy_kernels.END_*``)
+_END_NAMES = ("horizon", "stalled", "goal", "goal", "near-goal", "near-goal")
+
+
+class _GoalTester:
+    """Is the straight edge from a configuration to the goal free? The certified answer is
+    :func:`~pointplan.planners.edges.edge_free` at resolution 0.01 (the check of
+    :func:`connect_to_goal`). For a translating ball among boxes a quick test comes first:
+    the plain ball (a hair smaller) at the samples of the edge; if it overlaps a box the
+    edge is certainly not free, and the certified check is skipped (it would say the
+    same: a certified edge has no configuration touching an obstacle).
+    ``tests/test_policy_kernels.py`` checks that implication."""
+
+    def __init__(self, robot: Robot, scene: Scene, goal: np.ndarray, resolution: float = 0.01) -> None:
+        self.robot, self.scene, self.goal, self.resolution = robot, scene, goal, resolution
+        world = scene.world
+        self.boxes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        if isinstance(robot, (Disc2D, Sphere3D)) and world.batch_shape == () and all(type(o) is Box for o in scene.obstacles):
+            if world.box_c.shape[0] == len(scene.obstacles):
+                f = np.ascontiguousarray
+                self.boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        self.radius = float(getattr(robot, "radius", 0.0)) * (1.0 - 1e-9)
+
+    def free(self, q: np.ndarray, certify: bool) -> tuple[bool, int]:
+        """``(answer, configurations checked)``: with ``certify`` the certified answer;
+        without, ``False`` only where the quick test rules the edge out (otherwise
+        ``True``: maybe free)."""
+        checks = 0
+        if self.boxes is not None:
+            from ._policy_kernels import ball_segment_hits_boxes_count
+
+            hit, checks = ball_segment_hits_boxes_count(q, self.goal, self.radius, self.resolution, *self.boxes)
+            if hit:
+                return False, checks
+        if not certify:
+            return True, checks
+        ok, n = edge_free(self.robot, self.scene.world, q, self.goal, self.resolution, self.scene.low, self.scene.high)
+        return ok, checks + n
+
+
 @dataclass
 class _Rollout:
     """One robot's rollout in :meth:`PolicyPlanner._rollout_one`: where it is, its path
@@ -188,6 +233,9 @@ class _Rollout:
     t_obs: float = 0.0
     t_net: float = 0.0
     t_motion: float = 0.0
+    t_goal: float = 0.0
+    #: the certified edge from ``q`` to the goal was found free (greedy goal connection)
+    at_goal: bool = False
 
 
 class PolicyPlanner:
@@ -227,6 +275,8 @@ class PolicyPlanner:
         seed: int = 0,
         observer_wrapper: Callable[[Any], Any] | None = None,
         draws: int = 1,
+        greedy_goal: bool = True,
+        compiled: bool = True,
     ) -> None:
         from ..models.policy import Policy
 
@@ -247,8 +297,11 @@ class PolicyPlanner:
         self.seed = int(seed)
         self.observer_wrapper = observer_wrapper
         self.draws = max(1, int(draws))
+        self.greedy_goal = bool(greedy_goal)
+        self.compiled = bool(compiled)
         #: the network as numpy arrays (weights as of now), or None: PyTorch on one thread
         self.fast = policy.fast_actor()
+        self._net: tuple[Any, ...] | None = self._kernel_weights() if self.compiled else None
         self._observer: Any = None
         self._stream_rng: np.random.Generator | None = None
         self._stream = np.empty(0)
@@ -288,28 +341,41 @@ class PolicyPlanner:
             self._stream = np.concatenate([self._stream, self._stream_rng.random(more)])
         return self._stream
 
-    def _lean_step(self) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None:
-        """For a robot that only translates, seeing points, with the numpy network:
-        ``(q, goal, u) -> action`` for the observation ``observe_one(q, u=u)``, without
-        building the observation. The body frame is a translation, so the input layer's
-        pre-activations are a per-scene table (``points / scale @ W + normals @ W + b``)
-        minus one row (``q / scale @ W``), gathered for the drawn points: the same
-        arithmetic up to float32 round-off (about 1e-7). ``None`` otherwise."""
+    def _fold(self) -> tuple[np.ndarray, np.ndarray, np.float32, int] | None:
+        """For a robot that only translates, seeing points, with the numpy network: the
+        per-scene table of the input layer's pre-activations (``points / scale @ W +
+        normals @ W + b``), the rows of ``W`` that multiply the position, the scale as
+        float32 and the number of points; ``None`` otherwise."""
         robot, observer, fast = self.robot, self._observer, self.fast
         if fast is None or not isinstance(robot, (Disc2D, Sphere3D)) or type(observer).observe_one is not PointSetObserver.observe_one:
             return None
         pts, nrm = observer.points_one()
-        count, n, d = len(pts), observer.n_points, robot.dim
+        count = len(pts)
         if count == 0:
             return None
-        m = max(count, 1)
-        s32 = np.float32(robot.action_scale[0])
         w, b = fast.inp
         x = (pts / robot.action_scale[0]).astype(np.float32)
         if observer.with_normals:
             x = np.concatenate([x, nrm.astype(np.float32)], 1)
         table = x @ w + b  # (count, width)
-        w_pos = w[:d]
+        return table, np.ascontiguousarray(w[: robot.dim]), np.float32(robot.action_scale[0]), count
+
+    def _lean_step(
+        self, fold: tuple[np.ndarray, np.ndarray, np.float32, int] | None = None
+    ) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None:
+        """For a robot that only translates, seeing points, with the numpy network:
+        ``(q, goal, u) -> action`` for the observation ``observe_one(q, u=u)``, without
+        building the observation. The body frame is a translation, so the input layer's
+        pre-activations are a per-scene table (:meth:`_fold`) minus one row
+        (``q / scale @ W``), gathered for the drawn points: the same arithmetic up to
+        float32 round-off (about 1e-7). ``None`` otherwise."""
+        fold = fold or self._fold()
+        if fold is None:
+            return None
+        fast, robot, n = self.fast, self.robot, self._observer.n_points
+        assert fast is not None
+        table, w_pos, s32, count = fold
+        m = max(count, 1)
         scale = robot.action_scale
 
         def step(q: np.ndarray, goal: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -322,6 +388,102 @@ class PolicyPlanner:
 
         return step
 
+    def _kernel_weights(self) -> tuple[Any, ...] | None:
+        """What :func:`~._policy_kernels.rollout_ball` needs of the planner (the packed
+        weights, the action scale, the float and int parameters), or ``None`` when the
+        compiled rollout does not apply (not a ball, not a PointNet in numpy, hidden
+        layers of another width)."""
+        from . import _policy_kernels as K
+
+        fast, robot, env = self.fast, self.robot, self.env
+        if fast is None or not isinstance(robot, (Disc2D, Sphere3D)):
+            return None
+        width = fast.inp[0].shape[1]
+        if any(w.shape != (width, width) for w, _ in fast.hidden) or fast.head[0][0].shape[0] != width + robot.dim:
+            return None
+        fparams = np.zeros(6)
+        fparams[[K.F_RADIUS, K.F_SUBSTEP, K.F_GOAL_TOL, K.F_STALL_DIST, K.F_RESOLUTION, K.F_S32]] = (
+            robot.radius,
+            env.substep,
+            env.goal_tolerance,
+            self.stall_distance,
+            0.01,  # the goal edge: as connect_to_goal checks it
+            float(np.float32(robot.action_scale[0])),
+        )
+        iparams = np.zeros(7, np.int64)
+        iparams[[K.I_HORIZON, K.I_STALL_STEPS, K.I_GREEDY, K.I_CONNECT, K.I_CLIP, K.I_N_POINTS, K.I_ACTION_DIM]] = [
+            int(self.horizon),
+            int(self.stall_steps or 0),
+            int(self.greedy_goal),
+            int(self.connect_goal),
+            int(env.bounds == "clip"),
+            int(env.n_points or 0),
+            int(fast.action_dim),
+        ]
+        return K.pack_weights(fast.inp, fast.hidden, fast.head), np.ascontiguousarray(robot.action_scale, np.float64), fparams, iparams
+
+    def _scene_inputs(self, scene: Scene) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
+        """For the compiled rollout: the observer's points of the scene, their normals
+        (``(count, 0)`` without) and the scene's boxes; ``None`` when the scene has
+        obstacles other than boxes or no points."""
+        world = scene.world
+        obstacles = scene.obstacles
+        if world.batch_shape != () or world.box_c.shape[0] != len(obstacles) or not all(type(o) is Box for o in obstacles):
+            return None
+        pts, nrm = self._observer.points_one()
+        if not len(pts):
+            return None
+        f = np.ascontiguousarray
+        nrm = f(nrm, np.float64) if self._observer.with_normals else np.zeros((len(pts), 0))
+        return f(pts, np.float64), nrm, (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+
+    def _rollout_compiled(self, problem: Problem, pts: np.ndarray, nrm: np.ndarray, boxes: tuple[np.ndarray, np.ndarray, np.ndarray], t0: float) -> PlanResult:
+        """``_rollout_one`` in one compiled call (:func:`~._policy_kernels.rollout_ball`):
+        a ball among boxes, one draw per step, the numpy network."""
+        from . import _policy_kernels as K
+
+        assert self._net is not None
+        scene = problem.scene
+        weights, scale, fparams, iparams = self._net
+        n_points = self._observer.n_points
+        blk = max(len(pts), 1) + n_points
+        iparams[K.I_N_POINTS] = n_points  # the observer's (the env may leave it to the observer)
+        goal = np.asarray(problem.goal, np.float64)
+        t1 = time.perf_counter()
+        end, path, checks, _ = K.rollout_ball(
+            np.asarray(problem.start, np.float64),
+            goal,
+            scene.low,
+            scene.high,
+            boxes,
+            pts,
+            nrm,
+            weights,
+            scale,
+            fparams,
+            iparams,
+            self._uniforms(self.horizon * blk),
+        )
+        t2 = time.perf_counter()
+        steps = len(path) - 1
+        to_goal = end == K.END_GREEDY or end == K.END_TOL_GOAL
+        success = to_goal or end == K.END_TOL_BLOCKED or end == K.END_TOL
+        res = PlanResult(path=np.concatenate([path, goal[None]]) if to_goal else path, success=success, nodes=steps, collision_checks=checks, time_s=0.0)
+        info = res.info
+        info["time_split"] = {"observe": 0.0, "network": 0.0, "motion": 0.0, "goal": 0.0, "compiled": t2 - t1, "steps": steps}
+        info["end"] = _END_NAMES[end]
+        if end == K.END_GREEDY:
+            info["greedy_goal"] = True
+        if to_goal or end == K.END_TOL_BLOCKED:
+            info["goal_connection"] = "free" if to_goal else "blocked"
+        elif self.connect_goal and not success:
+            info["goal_connection"] = None
+        res.time_s = time.perf_counter() - t0
+        return res
+
+    def _goal_tester(self, scene: Scene, goal: np.ndarray) -> _GoalTester:
+        return _GoalTester(self.robot, scene, goal)
+
     def _rollout_one(self, problem: Problem) -> PlanResult:
         """One robot stepped as the environment steps it: the same observation draws as
         ``rollout_batch`` with this one problem and the same ``q_free``, without the batch.
@@ -332,24 +494,44 @@ class PolicyPlanner:
         elsewhere (a collision, a bound) the rollout is exactly the sequential one; from
         there it continues from where ``q_free`` put the robot, with the same draws. So
         the result is the sequential rollout's, at one motion-check call per run ahead
-        instead of one per step."""
+        instead of one per step.
+
+        With ``greedy_goal`` the rollout stops at the first configuration it reaches (the
+        start included) from which the straight edge to the goal is certified free
+        (:class:`_GoalTester`); up to there it is the rollout without."""
         t0 = time.perf_counter()
         robot, scene = self.robot, problem.scene
         if problem.start.shape != (robot.config_dim,):
             raise ValueError(f"problem {problem.tag or ''} does not fit robot {robot.name}")
         self._observer.set_scene(0, scene)
+        if self._net is not None and self.draws == 1 and self.observer_wrapper is None and type(self._observer).observe_one is PointSetObserver.observe_one:
+            inputs = self._scene_inputs(scene)
+            if inputs is not None:
+                return self._rollout_compiled(problem, *inputs, t0)
         lean = self._lean_step()
         goal = np.asarray(problem.goal, np.float64)
         q = np.asarray(problem.start, np.float64).copy()
         r = _Rollout(q=q, path=[q])
+        tester = self._goal_tester(scene, goal) if self.greedy_goal else None
         ctx = torch_threads(1) if self.fast is None else contextlib.nullcontext()
         with ctx:
             while r.t < self.horizon and not r.success and r.end == "horizon":
-                qs, twists, dists = self._run_ahead(r, scene, goal, lean)
+                qs, twists, dists = self._run_ahead(r, scene, goal, lean, tester)
+                if r.at_goal:
+                    break
                 self._keep_agreeing(r, scene, goal, qs, twists, dists)
+            if tester is not None and not r.success and not r.at_goal:  # where the rollout stopped
+                tg = time.perf_counter()
+                r.at_goal, checks = tester.free(r.q, certify=True)
+                r.checks += checks
+                r.t_goal += time.perf_counter() - tg
         steps = len(r.path) - 1
-        res = PlanResult(path=np.stack(r.path), success=r.success, nodes=steps, collision_checks=r.checks, time_s=time.perf_counter() - t0)
-        res.info["time_split"] = {"observe": r.t_obs, "network": r.t_net, "motion": r.t_motion, "steps": steps}
+        path = np.stack(r.path + [goal]) if r.at_goal else np.stack(r.path)
+        res = PlanResult(path=path, success=r.success or r.at_goal, nodes=steps, collision_checks=r.checks, time_s=time.perf_counter() - t0)
+        res.info["time_split"] = {"observe": r.t_obs, "network": r.t_net, "motion": r.t_motion, "goal": r.t_goal, "steps": steps}
+        if r.at_goal:
+            res.info["end"], res.info["goal_connection"], res.info["greedy_goal"] = "goal", "free", True
+            return res
         if not r.success:
             res.info["end"] = r.end
         if self.connect_goal:
@@ -358,17 +540,37 @@ class PolicyPlanner:
             res.info.setdefault("end", "near-goal" if r.success else r.end)
         return res
 
-    def _run_ahead(self, r: _Rollout, scene: Scene, goal: np.ndarray, lean: Any) -> tuple[list[np.ndarray], list[np.ndarray], list[float]]:
+    def _run_ahead(
+        self, r: _Rollout, scene: Scene, goal: np.ndarray, lean: Any, tester: _GoalTester | None = None
+    ) -> tuple[list[np.ndarray], list[np.ndarray], list[float]]:
         """Steps of the policy from ``(r.q, r.t)``, every move assumed free: the
-        configurations (``r.q`` first), the twists and the distances to the goal."""
+        configurations (``r.q`` first), the twists and the distances to the goal.
+
+        With a goal ``tester``: at ``r.q`` the edge to the goal is checked (certified; when
+        free, ``r.at_goal`` is set and nothing is returned); at a configuration ahead that
+        passes the tester's quick test the run ahead stops there (the next run, from there
+        once ``q_free`` has confirmed the moves, certifies the edge)."""
         robot, observer, stall, stall_r = self.robot, self._observer, self.stall_steps, self.stall_distance
         per_step, tol, k_draws = observer.draws_one(), self.env.goal_tolerance, self.draws
         blk = per_step * k_draws
         clip_target = self.env.bounds == "clip"
         scale = np.asarray(robot.action_scale, np.float64)
-        qs, twists, dists = [r.q], [], []
+        qs: list[np.ndarray] = [r.q]
+        twists: list[np.ndarray] = []
+        dists: list[float] = []
         qq, t = r.q, r.t
         for s in range(t, self.horizon):
+            if tester is not None:
+                tg = time.perf_counter()
+                maybe, checks = tester.free(qq, certify=s == t)
+                if s == t or not maybe:  # a quick pass ahead is done again when the run gets there
+                    r.checks += checks
+                r.t_goal += time.perf_counter() - tg
+                if maybe:
+                    if s == t:
+                        r.at_goal = True
+                        return qs, twists, dists
+                    break  # confirm the moves up to here first
             u = self._uniforms((s + 1) * blk)[s * blk : (s + 1) * blk]
             ta = time.perf_counter()
             if lean is not None:  # observation and network in one (timed as network)

@@ -1,0 +1,544 @@
+"""Compiled (numba) kernels of the batch-1 policy planner (:mod:`pointplan.planners.policy`)
+for a translating ball (the 2D disc, the 3D sphere) among boxes.
+
+- :func:`ball_segment_hits_boxes_count`: a quick *necessary* test for the certified edge
+  check: does the plain ball (no growth, a hair smaller) overlap a box at some sample of
+  the segment? Then the segment is certainly not free (a certified edge has no
+  configuration touching an obstacle), and the certified check may be skipped.
+- :func:`ball_motion`: the certified motion check of
+  :func:`pointplan.robots.motion.check_motions` for one motion of a ball among boxes
+  (grown samples, the start fallback, the bounds), written out on floats: the same
+  arithmetic in the same order, so the same verdict and the same counts.
+- :func:`pointnet_action`: the deterministic action of a PointNet actor from the folded
+  first layer (a per-scene table minus one row per step, see ``PolicyPlanner._lean_step``)
+  and the observation's draws: the same as
+  :meth:`pointplan.models.policy.NumpyPointNetActor.from_first_layer` up to float32
+  round-off (the ELU's exponential is a polynomial here, relative error about 1e-7).
+- :func:`rollout_ball`: a whole rollout of ``PolicyPlanner.plan`` (greedy goal test, action,
+  ``q_free``'s move, the end tests) in one call.
+
+``tests/test_policy_kernels.py`` compares each with the numpy/PyTorch code it replaces.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+#: as in pointplan.robots.motion (imported there; repeated as literals for the compiler)
+_CONTACT_MARGIN = 1e-5
+_BOUNDS_EPS = 1e-12
+_GRID_SLACK = 1e-9
+
+#: rollout ends (``rollout_ball``'s code)
+END_HORIZON, END_STALLED, END_GREEDY, END_TOL_GOAL, END_TOL_BLOCKED, END_TOL = 0, 1, 2, 3, 4, 5
+
+_jit = numba.njit(cache=True, nogil=True)
+_jit_fast = numba.njit(cache=True, nogil=True, fastmath=True)
+
+
+# ------------------------------------------------------------------ collision tests
+@_jit
+def _hits_boxes(p, r2, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
+    """``any(sphere_box_sqdist(p, boxes) <= r2)``, written as collision.py computes it."""
+    d = p.shape[0]
+    for k in range(box_c.shape[0]):
+        out = 0.0
+        for i in range(d):
+            local = (p[0] - box_c[k, 0]) * box_r[k, 0, i]
+            for j in range(1, d):
+                local = local + (p[j] - box_c[k, j]) * box_r[k, j, i]
+            ex = abs(local) - box_h[k, i]
+            if ex < 0.0:
+                ex = 0.0
+            out += ex * ex
+        if out <= r2:
+            return True
+    return False
+
+
+@_jit
+def _segment_hits(a, b, radius, spacing, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
+    d = a.shape[0]
+    length2 = 0.0
+    for i in range(d):
+        length2 += (b[i] - a[i]) ** 2
+    n = int(np.ceil(np.sqrt(length2) / spacing))
+    if n < 1:
+        n = 1
+    r2 = radius * radius
+    p = np.empty(d)
+    for j in range(n + 1):
+        s = j / n
+        for i in range(d):
+            p[i] = a[i] + s * (b[i] - a[i])
+        for k in range(box_c.shape[0]):
+            dist2 = 0.0
+            for i in range(d):  # local coordinate i: column i of the box rotation
+                loc = 0.0
+                for m in range(d):
+                    loc += (p[m] - box_c[k, m]) * box_r[k, m, i]
+                ex = abs(loc) - box_h[k, i]
+                if ex > 0.0:
+                    dist2 += ex * ex
+            if dist2 < r2:
+                return True, j + 1
+    return False, n + 1
+
+
+def ball_segment_hits_boxes_count(
+    a: np.ndarray, b: np.ndarray, radius: float, spacing: float, box_c: np.ndarray, box_r: np.ndarray, box_h: np.ndarray
+) -> tuple[bool, int]:
+    """Does a ball of ``radius`` centred at one of the points ``a + (j / n) (b - a)``,
+    ``n = ceil(|b - a| / spacing)``, overlap (distance below ``radius``) one of the boxes
+    ``box_c: (K, d)``, ``box_r: (K, d, d)`` (columns are the box axes), ``box_h: (K, d)``
+    (half sides)? Returns the answer and the number of sample points tested (up to the
+    first hit)."""
+    hit, n = _segment_hits(a, b, float(radius), float(spacing), box_c, box_r, box_h)
+    return bool(hit), int(n)
+
+
+@_jit
+def _motion(q0, tw, n, radius, low, high, box_c, box_r, box_h, fallback, end):  # type: ignore[no-untyped-def]
+    """check_motions for one motion ``q0 + s tw`` in ``n`` sub-steps: returns ``(free,
+    collided, checks)`` and writes the last free sample (``q0`` when ``free <= 0``) to
+    ``end``."""
+    d = q0.shape[0]
+    seg2 = 0.0
+    for i in range(d):
+        si = tw[i] / n
+        seg2 += si * si
+    rg = np.sqrt(radius * radius + (0.5 * 0.5) * seg2) + _CONTACT_MARGIN
+    r2g = rg * rg
+    checks = n + 1
+    cfg = np.empty(d)
+    for i in range(d):
+        end[i] = q0[i]
+    for j in range(n + 1):
+        s = min(j / n, 1.0)
+        for i in range(d):
+            cfg[i] = q0[i] + tw[i] * s
+        bad = _hits_boxes(cfg, r2g, box_c, box_r, box_h)
+        if j == 0 and bad and fallback:
+            r0 = np.sqrt(radius * radius + (0.0 * 0.0) * seg2) + _CONTACT_MARGIN
+            r1 = np.sqrt(radius * radius + (1.0 * 1.0) * seg2) + _CONTACT_MARGIN
+            cfg1 = np.empty(d)
+            s1 = min(1 / n, 1.0)
+            for i in range(d):
+                cfg1[i] = q0[i] + tw[i] * s1
+            if not _hits_boxes(cfg, r0 * r0, box_c, box_r, box_h) and not _hits_boxes(cfg1, r1 * r1, box_c, box_r, box_h):
+                bad = False
+            checks += 2
+        out = False
+        for i in range(d):
+            mid = (high[i] + low[i]) / 2
+            half = (high[i] - low[i]) / 2 + _BOUNDS_EPS
+            if abs(cfg[i] - mid) > half:
+                out = True
+        if bad or out:
+            return j - 1, bad, checks
+        for i in range(d):
+            end[i] = cfg[i]
+    return n, False, checks
+
+
+def ball_motion(
+    q0: np.ndarray,
+    twist: np.ndarray,
+    n: int,
+    radius: float,
+    low: np.ndarray,
+    high: np.ndarray,
+    box_c: np.ndarray,
+    box_r: np.ndarray,
+    box_h: np.ndarray,
+    fallback: bool = True,
+) -> tuple[int, bool, int, np.ndarray]:
+    """``check_motions`` of one motion of a ball among boxes: ``(free, collided, checks,
+    last free configuration)``."""
+    end = np.empty_like(q0)
+    free, hit, checks = _motion(q0, twist, int(n), float(radius), low, high, box_c, box_r, box_h, bool(fallback), end)
+    return int(free), bool(hit), int(checks), end
+
+
+@_jit
+def _intervals(length, resolution):  # type: ignore[no-untyped-def]
+    k = int(np.ceil(length / resolution - _GRID_SLACK))
+    return k if k > 1 else 1
+
+
+@_jit
+def _norm(v):  # type: ignore[no-untyped-def]
+    s = 0.0
+    for i in range(v.shape[0]):
+        s += v[i] * v[i]
+    return np.sqrt(s)
+
+
+@_jit
+def _q_free(q, tw, radius, low, high, box_c, box_r, box_h, substep, clip_target, new_q):  # type: ignore[no-untyped-def]
+    """``pointplan.envs.core.q_free`` for one move: writes the end to ``new_q``, returns
+    ``(collided, checks)``."""
+    d = q.shape[0]
+    v = tw.copy()
+    if clip_target:
+        moved = False
+        for i in range(d):
+            target = q[i] + tw[i]
+            c = min(max(target, low[i]), high[i])
+            if c != target:
+                moved = True
+        if moved:
+            for i in range(d):
+                target = q[i] + tw[i]
+                v[i] = min(max(target, low[i]), high[i]) - q[i]
+    n = _intervals(_norm(v), substep)
+    free, hit, checks = _motion(q, v, n, radius, low, high, box_c, box_r, box_h, True, new_q)
+    return hit, checks
+
+
+@_jit
+def _edge_free(a, b, radius, resolution, low, high, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
+    """``pointplan.planners.edges.edge_free`` for a ball among boxes: ``(free, checks)``."""
+    d = a.shape[0]
+    v = np.empty(d)
+    for i in range(d):
+        v[i] = b[i] - a[i]
+    length = _norm(v)
+    end = np.empty(d)
+    if length <= 1e-12:  # check_free of the configuration itself (plain ball, bounds)
+        if _hits_boxes(a, radius * radius, box_c, box_r, box_h):
+            return False, 1
+        for i in range(d):
+            if not (a[i] >= low[i] - 1e-9 and a[i] <= high[i] + 1e-9):  # in_bounds' eps
+                return False, 1
+        return True, 1
+    m = _intervals(length, resolution)
+    free, hit, checks = _motion(a, v, m, radius, low, high, box_c, box_r, box_h, True, end)
+    return free == m, checks
+
+
+def ball_edge_free(
+    a: np.ndarray, b: np.ndarray, radius: float, resolution: float, low: np.ndarray, high: np.ndarray, box_c: np.ndarray, box_r: np.ndarray, box_h: np.ndarray
+) -> tuple[bool, int]:
+    """``edge_free`` of a ball among boxes (see :func:`_edge_free`)."""
+    ok, n = _edge_free(a, b, float(radius), float(resolution), low, high, box_c, box_r, box_h)
+    return bool(ok), int(n)
+
+
+# ------------------------------------------------------------------ the network
+@_jit_fast
+def _elu_bias(x, b, tmp, ki):  # type: ignore[no-untyped-def]
+    """ELU of ``x + b`` in place (``x: (N, W)`` float32, ``b: (W,)``; ``tmp``, ``ki``:
+    scratch of ``N * W`` float32, int32): ``v`` for ``v > 0``, else ``exp(v) - 1`` with
+    ``exp`` as ``2^k p(r)`` (Cephes' expf polynomial; relative error about 1e-7), in loops
+    the compiler vectorises."""
+    n, width = x.shape
+    for p in range(n):
+        for o in range(width):
+            x[p, o] += b[o]
+    flat = x.reshape(-1)
+    size = flat.shape[0]
+    for i in range(size):
+        v = min(flat[i], np.float32(0.0))
+        v = max(v, np.float32(-87.0))
+        k = np.floor(v * np.float32(1.4426950408889634) + np.float32(0.5))
+        r = v - k * np.float32(0.693359375) - k * np.float32(-2.12194440e-4)
+        p = np.float32(1.9875691500e-4)
+        p = p * r + np.float32(1.3981999507e-3)
+        p = p * r + np.float32(8.3334519073e-3)
+        p = p * r + np.float32(4.1665795894e-2)
+        p = p * r + np.float32(1.6666665459e-1)
+        p = p * r + np.float32(5.0000001201e-1)
+        tmp[i] = p * r * r + r + np.float32(1.0)
+        ki[i] = (np.int32(k) + np.int32(127)) << np.int32(23)
+    scale = ki[:size].view(np.float32)
+    for i in range(size):
+        e = tmp[i] * scale[i] - np.float32(1.0)
+        flat[i] = flat[i] if flat[i] > np.float32(0.0) else e
+
+
+@_jit
+def _select(u, count, n_points, idx):  # type: ignore[no-untyped-def]
+    """The drawn points: ``argsort(u[:m])[:n]`` as a set (the network max-pools, so the
+    order does not matter), padded with ``(u[m + count : m + n] * count)`` when the scene
+    has fewer points than ``n``. The set is the points whose key is at most the ``n``-th
+    smallest (the keys are uniform doubles: no ties)."""
+    m = count if count > 1 else 1
+    k = min(n_points, m)
+    if k == m:
+        for i in range(m):
+            idx[i] = i
+    else:
+        keys = u[:m]
+        thr = np.partition(keys, k - 1)[k - 1]
+        j = 0
+        for i in range(m):
+            if keys[i] <= thr and j < k:
+                idx[j] = i
+                j += 1
+    if count < n_points:
+        for i in range(count, n_points):
+            idx[i] = int(u[m + i] * count)
+
+
+def pack_weights(
+    inp: tuple[np.ndarray, np.ndarray], hidden: list[tuple[np.ndarray, np.ndarray]], head: list[tuple[np.ndarray, np.ndarray]]
+) -> tuple[np.ndarray, np.ndarray]:
+    """A PointNet actor's weights (``NumpyPointNetActor``'s ``inp``, ``hidden``, ``head``;
+    ``W`` as ``(in, out)``) as one float32 array and its layout: ``[width, features,
+    n_hidden, n_head, then per head layer its input and output widths]``, the arrays in
+    the order input W, b, hidden Ws, hidden bs, head (W, b) pairs. Hidden layers are
+    ``width x width``; the residual ones (all but the last) are stored as ``W + I``
+    (``h W + h = h (W + I)``, one product)."""
+    w0, b0 = inp
+    features, width = w0.shape
+    eye = np.eye(width, dtype=np.float32)
+    hid = [w + eye if i < len(hidden) - 1 else w for i, (w, _) in enumerate(hidden)]
+    parts = [w0.ravel(), b0.ravel()] + [w.ravel() for w in hid] + [b.ravel() for _, b in hidden]
+    layout = [width, features, len(hidden), len(head)]
+    for w, b in head:
+        parts += [w.ravel(), b.ravel()]
+        layout += [w.shape[0], w.shape[1]]
+    return np.ascontiguousarray(np.concatenate(parts), np.float32), np.asarray(layout, np.int64)
+
+
+@_jit_fast
+def _table(pts, nrm, s, wflat, layout):  # type: ignore[no-untyped-def]
+    """The input layer's pre-activations of a scene's points, ``[f32(pts / s), f32(nrm)]
+    @ W + b`` (``nrm`` may have no columns)."""
+    width, features = layout[0], layout[1]
+    count, d = pts.shape
+    e = nrm.shape[1]
+    out = np.empty((count, width), np.float32)
+    x = np.empty(features, np.float32)
+    for p in range(count):
+        for i in range(d):
+            x[i] = np.float32(pts[p, i] / s)
+        for j in range(e):
+            x[d + j] = np.float32(nrm[p, j])
+        for o in range(width):
+            out[p, o] = wflat[features * width + o]
+        for i in range(features):
+            xi = x[i]
+            for o in range(width):
+                out[p, o] += xi * wflat[i * width + o]
+    return out
+
+
+@_jit_fast
+def _action(q, goal, idx, table, s32, wflat, layout, scale, action_dim, h, y, tmp, ki):  # type: ignore[no-untyped-def]
+    """The actor's action (float32) for the drawn points ``idx``: the first layer from
+    the per-scene ``table`` minus ``(q / s32) @ W[:d]`` (see ``PolicyPlanner._lean_step``),
+    ELU, the hidden layers (residual, the last max-pooled), the head on ``[pooled, (goal
+    - q) / scale]``, ``tanh`` of the first ``action_dim`` outputs. ``h``, ``y``: ``(n,
+    width)`` float32 scratch, ``tmp``, ``ki``: ``n * width`` float32, int32 scratch."""
+    d = q.shape[0]
+    n = h.shape[0]
+    width, features, n_hidden, n_head = layout[0], layout[1], layout[2], layout[3]
+    row = np.zeros(width, np.float32)
+    for i in range(d):
+        qi = np.float32(q[i] / s32)
+        for o in range(width):
+            row[o] += qi * wflat[i * width + o]
+    for p in range(n):
+        src = idx[p]
+        for o in range(width):
+            h[p, o] = table[src, o] - row[o]
+    zero = np.zeros(width, np.float32)
+    _elu_bias(h, zero, tmp, ki)
+    off_w = features * width + width
+    off_b = off_w + n_hidden * width * width
+    pooled = np.empty(width, np.float32)
+    if n_hidden == 0:
+        for o in range(width):
+            pooled[o] = h[0, o]
+        for p in range(1, n):
+            for o in range(width):
+                pooled[o] = max(pooled[o], h[p, o])
+    for li in range(n_hidden):
+        w = wflat[off_w + li * width * width : off_w + (li + 1) * width * width].reshape(width, width)
+        b = wflat[off_b + li * width : off_b + (li + 1) * width]
+        np.dot(h, w, y)
+        if li < n_hidden - 1:  # residual: w is W + I, so y = h W + h
+            _elu_bias(y, b, tmp, ki)
+            h, y = y, h
+        else:  # the last one max-pooled: max(y + b) = max(y) + b
+            for o in range(width):
+                pooled[o] = y[0, o]
+            for p in range(1, n):
+                for o in range(width):
+                    pooled[o] = max(pooled[o], y[p, o])
+            for o in range(width):
+                pooled[o] += b[o]
+    z = np.empty((1, width + d), np.float32)
+    for o in range(width):
+        z[0, o] = pooled[o]
+    for i in range(d):
+        z[0, width + i] = np.float32((goal[i] - q[i]) / scale[i])
+    off = off_b + n_hidden * width
+    for li in range(n_head):
+        k_in, k_out = layout[4 + 2 * li], layout[5 + 2 * li]
+        w = wflat[off : off + k_in * k_out].reshape(k_in, k_out)
+        off += k_in * k_out
+        out = np.dot(z, w)
+        b = wflat[off : off + k_out]
+        off += k_out
+        if li < n_head - 1:
+            _elu_bias(out, b, tmp, ki)
+        else:
+            for o in range(k_out):
+                out[0, o] += b[o]
+        z = out
+    a = np.empty(action_dim, np.float32)
+    for i in range(action_dim):
+        a[i] = np.tanh(z[0, i])
+    return a
+
+
+def pointnet_action(
+    q: np.ndarray,
+    goal: np.ndarray,
+    u: np.ndarray,
+    n_points: int,
+    pts: np.ndarray,
+    nrm: np.ndarray,
+    s32: float,
+    wflat: np.ndarray,
+    layout: np.ndarray,
+    scale: np.ndarray,
+    action_dim: int,
+) -> np.ndarray:
+    """One action of the folded PointNet actor (:func:`_table`, :func:`_select`,
+    :func:`_action`) for the scene's points ``pts`` (world frame), normals ``nrm`` (``(count,
+    0)`` without) and the draws ``u``."""
+    idx = np.empty(n_points, np.int64)
+    _select(u, len(pts), n_points, idx)
+    table = _table(pts, nrm, float(s32), wflat, layout)
+    width = int(layout[0])
+    h, y = np.empty((n_points, width), np.float32), np.empty((n_points, width), np.float32)
+    tmp, ki = np.empty(n_points * width, np.float32), np.empty(n_points * width, np.int32)
+    return _action(q, goal, idx, table, float(s32), wflat, layout, scale, int(action_dim), h, y, tmp, ki)
+
+
+# ------------------------------------------------------------------ a whole rollout
+@_jit_fast
+def _clip_twist(a, scale, tw):  # type: ignore[no-untyped-def]
+    for i in range(tw.shape[0]):
+        ai = min(max(a[i], np.float32(-1.0)), np.float32(1.0))
+        tw[i] = np.float64(ai) * scale[i]
+
+
+#: ``fparams`` of :func:`_rollout`
+F_RADIUS, F_SUBSTEP, F_GOAL_TOL, F_STALL_DIST, F_RESOLUTION, F_S32 = range(6)
+#: ``iparams`` of :func:`_rollout`
+I_HORIZON, I_STALL_STEPS, I_GREEDY, I_CONNECT, I_CLIP, I_N_POINTS, I_ACTION_DIM = range(7)
+
+
+@_jit
+def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, scale, fparams, iparams, stream, path, counters):  # type: ignore[no-untyped-def]
+    """A rollout of ``PolicyPlanner.plan`` (see :func:`rollout_ball`); writes the policy's
+    configurations to ``path`` and ``(steps, checks, certified goal edges)`` to
+    ``counters``; returns the end code."""
+    radius, substep, goal_tol = fparams[F_RADIUS], fparams[F_SUBSTEP], fparams[F_GOAL_TOL]
+    stall_dist, resolution, s32 = fparams[F_STALL_DIST], fparams[F_RESOLUTION], fparams[F_S32]
+    horizon, stall_steps, n_points, action_dim = iparams[I_HORIZON], iparams[I_STALL_STEPS], iparams[I_N_POINTS], iparams[I_ACTION_DIM]
+    greedy, connect, clip_target = iparams[I_GREEDY] != 0, iparams[I_CONNECT] != 0, iparams[I_CLIP] != 0
+    d = q0.shape[0]
+    count = pts.shape[0]
+    m = count if count > 1 else 1
+    blk = m + n_points
+    table = _table(pts, nrm, s32, wflat, layout)
+    idx = np.empty(n_points, np.int64)
+    h = np.empty((n_points, layout[0]), np.float32)
+    y = np.empty((n_points, layout[0]), np.float32)
+    size = max(n_points * layout[0], np.max(layout[4:]))
+    tmp, ki = np.empty(size, np.float32), np.empty(size, np.int32)
+    tw = np.empty(d)
+    new_q = np.empty(d)
+    filt_r = radius * (1.0 - 1e-9)
+    for i in range(d):
+        path[0, i] = q0[i]
+    checks = 0
+    certified = 0
+    t = 0
+    end = END_HORIZON
+    while True:
+        q = path[t]
+        if greedy:  # is the straight edge to the goal free from here?
+            hit, c = _segment_hits(q, goal, filt_r, resolution, box_c, box_r, box_h)
+            checks += c
+            if not hit:
+                ok, c = _edge_free(q, goal, radius, resolution, low, high, box_c, box_r, box_h)
+                checks += c
+                certified += 1
+                if ok:
+                    end = END_GREEDY
+                    break
+        if t >= horizon or end == END_STALLED:
+            break
+        u = stream[t * blk : (t + 1) * blk]
+        _select(u, count, n_points, idx)
+        a = _action(q, goal, idx, table, s32, wflat, layout, scale, action_dim, h, y, tmp, ki)
+        _clip_twist(a, scale, tw)
+        hit, c = _q_free(q, tw, radius, low, high, box_c, box_r, box_h, substep, clip_target, new_q)
+        checks += c
+        t += 1
+        for i in range(d):
+            path[t, i] = new_q[i]
+        dist = 0.0
+        for i in range(d):
+            dist += (new_q[i] - goal[i]) ** 2
+        if np.sqrt(dist) < goal_tol and not hit:
+            end = END_TOL
+            if connect:
+                ok, c = _edge_free(new_q, goal, radius, resolution, low, high, box_c, box_r, box_h)
+                checks += c
+                end = END_TOL_GOAL if ok else END_TOL_BLOCKED
+            break
+        if stall_steps > 0 and t >= stall_steps:
+            back = 0.0
+            for i in range(d):
+                back += (new_q[i] - path[t - stall_steps, i]) ** 2
+            if np.sqrt(back) < stall_dist:
+                end = END_STALLED  # the goal is still tried from here (greedy)
+                if not greedy:
+                    break
+    counters[0] = t
+    counters[1] = checks
+    counters[2] = certified
+    return end
+
+
+def rollout_ball(
+    q0: np.ndarray,
+    goal: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+    boxes: tuple[np.ndarray, np.ndarray, np.ndarray],
+    pts: np.ndarray,
+    nrm: np.ndarray,
+    weights: tuple[np.ndarray, np.ndarray],
+    scale: np.ndarray,
+    fparams: np.ndarray,
+    iparams: np.ndarray,
+    stream: np.ndarray,
+) -> tuple[int, np.ndarray, int, int]:
+    """A rollout of ``PolicyPlanner.plan`` for a ball among boxes, one call: at each
+    configuration (the start included), with ``greedy``, the straight edge to the goal
+    (the quick test, then the certified check of ``edge_free``; stop at the goal when it
+    is free); the action of the network for the step's draws from ``stream``; the move as
+    ``q_free`` makes it; stop within the goal tolerance (then, with ``connect``, the edge
+    to the goal, as ``connect_to_goal``), at the horizon or stalled.
+
+    ``boxes``: ``(centres, rotations, half sides)``; ``pts``, ``nrm``: the observer's
+    points of the scene and their normals (``(count, 0)`` without); ``weights``: :func:`pack_weights`;
+    ``fparams``, ``iparams``: the ``F_*``, ``I_*`` entries. Returns ``(end code, the
+    policy's configurations (start first), collision checks, certified goal-edge checks
+    made)``."""
+    horizon = int(iparams[I_HORIZON])
+    path = np.empty((horizon + 1, len(q0)))
+    counters = np.zeros(3, np.int64)
+    end = _rollout(q0, goal, low, high, boxes[0], boxes[1], boxes[2], pts, nrm, weights[0], weights[1], scale, fparams, iparams, stream, path, counters)
+    steps = int(counters[0])
+    return int(end), path[: steps + 1], int(counters[1]), int(counters[2])

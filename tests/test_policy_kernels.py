@@ -1,0 +1,104 @@
+"""The compiled kernels of the batch-1 policy planner against the code they replace."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pointplan.models.policy import NumpyPointNetActor, Policy, shipped_checkpoint
+from pointplan.planners import _policy_kernels as K
+from pointplan.planners import make_planner
+from pointplan.planners.edges import edge_free
+from pointplan.robots.motion import intervals
+from pointplan.scenes.scenarios import Narrow2DScenario
+from pointplan.scenes.scene import Problem
+
+
+@pytest.fixture(scope="module")
+def problems() -> list[Problem]:
+    return Narrow2DScenario().problems("test", 20, seed=0)
+
+
+def _boxes(problem: Problem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    w = problem.scene.world
+    return np.ascontiguousarray(w.box_c), np.ascontiguousarray(w.box_r), np.ascontiguousarray(w.box_h)
+
+
+def test_motion_check_is_check_motions(problems: list[Problem]) -> None:
+    robot = Narrow2DScenario().robot
+    rng = np.random.default_rng(0)
+    kinds = set()
+    for p in problems:
+        low, high = p.scene.low, p.scene.high
+        q0 = rng.uniform(low - 0.02, high + 0.02, size=(60, 2))
+        tw = rng.normal(size=(60, 2)) * rng.choice([0.005, 0.05, 0.3], size=(60, 1))
+        n = intervals(np.linalg.norm(tw, axis=-1), 0.01)
+        ref = robot.check_motions(p.scene.world, q0, tw, n, low, high)
+        for i in range(60):
+            free, hit, checks, end = K.ball_motion(q0[i], tw[i], int(n[i]), robot.radius, low, high, *_boxes(p))
+            assert (free, hit, checks) == (int(ref.free[i]), bool(ref.collided[i]), int(ref.checks[i]))
+            if free > 0:
+                assert np.array_equal(end, ref.configs[i, free])
+            kinds.add((free == n[i], hit, free < 0))
+    assert len(kinds) >= 3  # free, stopped by a box, stopped by the bounds or at the start
+
+
+def test_edge_check_is_edge_free_and_the_quick_test_is_necessary(problems: list[Problem]) -> None:
+    robot = Narrow2DScenario().robot
+    rng = np.random.default_rng(1)
+    seen = {True: 0, False: 0}
+    for p in problems:
+        boxes = _boxes(p)
+        for _ in range(40):
+            a = rng.uniform(p.scene.low, p.scene.high)
+            b = a if rng.random() < 0.05 else rng.uniform(p.scene.low, p.scene.high)
+            ok, n = edge_free(robot, p.scene, a, b, 0.01)
+            assert K.ball_edge_free(a, b, robot.radius, 0.01, p.scene.low, p.scene.high, *boxes) == (ok, n)
+            hit, _ = K.ball_segment_hits_boxes_count(a, b, robot.radius * (1 - 1e-9), 0.01, *boxes)
+            if hit:
+                assert not ok
+            seen[ok] += 1
+    assert seen[True] > 20 and seen[False] > 20
+
+
+def test_compiled_action_matches_the_numpy_actor(problems: list[Problem]) -> None:
+    robot = Narrow2DScenario().robot
+    planner = make_planner("policy", robot)
+    planner.plan(problems[0])  # binds the observer
+    policy = Policy.from_checkpoint(shipped_checkpoint("disc2d"))
+    fast = NumpyPointNetActor.from_actor(policy.actor)
+    assert fast is not None
+    (wflat, layout), scale, _, _ = planner._net
+    obs_ = planner._observer
+    rng = np.random.default_rng(2)
+    worst = 0.0
+    for p in problems[:10]:
+        obs_.set_scene(0, p.scene)
+        pts, nrm = obs_.points_one()
+        for _ in range(5):
+            q = rng.uniform(p.scene.low, p.scene.high)
+            u = rng.random(obs_.draws_one())
+            ref = planner._act(obs_.observe_one(q, u=u), q, p.goal)  # numpy actor on the built observation
+            got = K.pointnet_action(q, p.goal, u, obs_.n_points, pts, nrm, float(np.float32(0.07)), wflat, layout, scale, 2)
+            worst = max(worst, float(np.abs(got - ref).max()))
+    assert worst < 1e-5
+
+
+def test_compiled_rollout_is_the_python_one(problems: list[Problem]) -> None:
+    robot = Narrow2DScenario().robot
+    for greedy in (True, False):
+        a = make_planner("policy", robot, greedy_goal=greedy)
+        b = make_planner("policy", robot, greedy_goal=greedy, compiled=False)
+        same = 0
+        for p in problems:
+            ra, rb = a.plan(p), b.plan(p)
+            assert "compiled" in ra.info["time_split"] and "compiled" not in rb.info["time_split"]
+            assert ra.success == rb.success
+            if (
+                ra.nodes == rb.nodes
+                and ra.path.shape == rb.path.shape
+                and np.allclose(ra.path, rb.path, atol=1e-5, rtol=0)
+                and ra.info["end"] == rb.info["end"]
+            ):
+                same += 1
+        assert same >= len(problems) - 1  # float32 round-off may part a rare failing rollout
