@@ -596,6 +596,65 @@ def _default_points(args: argparse.Namespace) -> int:
     return int(args.n_points or (256 if _default_observation(args) == "global" else 64))
 
 
+#: collision-classify options derived from CollisionConfig: flag -> field path
+COLLISION_OPTIONS = {
+    "n-points": "n_points",
+    "label": "label",
+    "train-scenes": "train_scenes",
+    "val-scenes": "val_scenes",
+    "test-scenes": "test_scenes",
+    "per-scene": "per_scene",
+    "band": "band",
+    "epochs": "epochs",
+    "lr": "lr",
+    "batch-size": "batch_size",
+    "encoder": "encoder",
+    "width": "width",
+    "seed": "seed",
+    "device": "device",
+}
+
+
+def cmd_collision_classify(args: argparse.Namespace) -> int:
+    from .config import given_options, replace_paths
+    from .learning.collision import OBSERVATIONS, CollisionConfig, make_data, train_classifier
+
+    names = [n.strip() for n in args.observation.split(",") if n.strip()]
+    unknown = [n for n in names if n not in OBSERVATIONS]
+    if unknown or not names:
+        raise CLIError(f"--observation: expected some of {', '.join(OBSERVATIONS)} (comma-separated), got {args.observation!r}")
+    base = replace_paths(CollisionConfig(observation=names[0]), given_options(args, COLLISION_OPTIONS))
+    run_dir = Path(args.run_dir)
+    try:
+        samples = make_data(base, progress=not args.quiet)  # the same samples for every representation
+    except KeyboardInterrupt:
+        print("\ninterrupted while drawing the samples: nothing trained", file=sys.stderr)
+        return 130
+    rows: dict[str, Any] = {}
+    interrupted = False
+    for name in names:
+        cfg = dataclasses.replace(base, observation=name)
+        res = train_classifier(cfg, run_dir, progress=not args.quiet, samples=samples)
+        t = res.test
+        rows[name] = res.summary(cfg)
+        print(
+            f"{name:>16}: test accuracy {100 * t['accuracy']:.1f}% (near the boundary {100 * t['accuracy_near']:.1f}%, "
+            f"away {100 * t['accuracy_far']:.1f}%), best epoch {res.best_epoch}, train {res.train_time_s:.0f} s"
+        )
+        if res.interrupted:
+            interrupted = True
+            break
+    if args.figure and not interrupted:
+        from .viz.collision import render_collision_errors
+
+        grid = render_collision_errors(run_dir, args.figure, names)
+        for name, g in grid.items():
+            rows[name]["figure_grid"] = g
+        print(f"wrote {args.figure}")
+    _write_json(args.json, {"run_dir": str(run_dir), "results": rows, "interrupted": interrupted})
+    return 130 if interrupted else 0
+
+
 def cmd_convert_checkpoint(args: argparse.Namespace) -> int:
     from .models.checkpoint import VERSION
     from .models.convert import convert_checkpoint
@@ -756,6 +815,30 @@ def _add_demo_parser(sub: Any) -> None:
     p.set_defaults(func=cmd_demo)
 
 
+def _add_collision_parser(sub: Any) -> None:
+    from .config import add_config_options
+    from .learning.collision import CollisionConfig
+
+    p = _subparser(
+        sub,
+        "collision-classify",
+        "the paper's collision classification (section 4.2): from the observation at a configuration and an action, predict whether the disc collides after the action (2D-Narrow)",
+    )
+    p.add_argument(
+        "--observation",
+        default="surface-normals",
+        help="image (CNN), interior, surface or surface-normals (PointNet); several comma-separated train one after the other on the same samples (default: %(default)s)",
+    )
+    add_config_options(p, CollisionConfig(), COLLISION_OPTIONS)
+    p.add_argument(
+        "--run-dir", default="runs/collision", help="where the classifiers (<observation>.pt), summaries and test predictions go (default: %(default)s)"
+    )
+    p.add_argument("--figure", help="draw where each classifier is wrong (a PNG) after training")
+    p.add_argument("--json", help="write the results here")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=cmd_collision_classify)
+
+
 def _add_convert_parser(sub: Any) -> None:
     p = _subparser(sub, "convert-checkpoint", "rewrite an older checkpoint holding pickled objects as a data-only one (unpickles OLD: trusted files only)")
     p.add_argument("old", help="the checkpoint to convert; it is fully unpickled, which can run code")
@@ -777,6 +860,7 @@ def build_parser() -> argparse.ArgumentParser:
         _add_train_parser,
         _add_bc_parser,
         _add_demo_parser,
+        _add_collision_parser,
         _add_convert_parser,
     ):
         add(sub)
