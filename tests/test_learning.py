@@ -216,6 +216,29 @@ def test_policy_average_is_an_exponential_average_of_the_actor(tmp_path: Path) -
     assert all(torch.equal(v, avg[k]) for k, v in again.actor_avg.state_dict().items())
 
 
+def test_the_average_starts_from_the_initial_actor(tmp_path: Path) -> None:
+    """``--init-actor`` with ``--policy-avg``: the averaged actor (what is validated and
+    saved) starts from the given weights, not from the random ones the networks were built
+    with (it once did, and validated a random policy for tens of thousands of updates)."""
+    from dataclasses import replace
+
+    from pointplan.learning.sac import SACConfig
+    from pointplan.models.checkpoint import load_checkpoint
+
+    own = replace(SMALL, shared_encoder=False)  # a shared encoder would learn from the critics' loss
+    base = TrainConfig(env="empty2d", num_envs=4, total_steps=300, warmup_steps=100, eval_every=300, eval_episodes=5, net=own, sac=SACConfig(batch_size=32))
+    train(base, tmp_path / "a", progress=False)
+    init = load_checkpoint(tmp_path / "a" / "last.pt")["actor"]
+    # a second run from those weights, with a different seed (other random weights at
+    # construction) and the actor frozen (its delay outlasts the run)
+    cfg = replace(base, seed=1, init_actor=str(tmp_path / "a" / "last.pt"), sac=replace(base.sac, policy_avg=0.01, actor_delay=10_000))
+    train(cfg, tmp_path / "b", progress=False)
+    agent = load_checkpoint(tmp_path / "b" / "last.pt")["trainer"]["agent"]
+    for k, v in init.items():
+        torch.testing.assert_close(agent["actor"][k], v)
+        torch.testing.assert_close(agent["actor_avg"][k], v)
+
+
 def test_training_resumes_from_last_checkpoint(tmp_path: Path) -> None:
     from dataclasses import replace
 

@@ -198,6 +198,13 @@ class SAC:
             **({"actor_avg": self.actor_avg.state_dict()} if self.actor_avg is not None else {}),
         }
 
+    def load_actor(self, actor_state: dict[str, Any]) -> None:
+        """Start from given actor weights (e.g. behavioural cloning's): the running average,
+        when kept, starts from them too (not from the random weights it was built with)."""
+        self.actor.load_state_dict(actor_state)
+        if self.actor_avg is not None:
+            self.actor_avg.load_state_dict(actor_state)
+
     def set_lr(self, lr: float) -> None:
         """Change the Adam step size of every optimiser (e.g. when resuming a run)."""
         for opt in (self.actor_opt, self.critic_opt, self.alpha_opt):

@@ -226,7 +226,7 @@ def _start(cfg: TrainConfig, run_dir: Path, resume: str | Path | None, remote: A
     agent = SAC(scenario.robot, env_cfg, obs_shape, cfg.net, cfg.sac, cfg.device)
     run = _Run(cfg, run_dir, scenario, core, env_cfg, obs_shape, rng, agent)
     if cfg.init_actor and resume is None:  # a resumed run has its own actor already
-        agent.actor.load_state_dict(load_checkpoint(cfg.init_actor, cfg.device)["actor"])
+        agent.load_actor(load_checkpoint(cfg.init_actor, cfg.device)["actor"])
     if resume is not None:
         _resume(run, resume)
         if run.steps >= cfg.total_steps:
