@@ -88,6 +88,14 @@ def test_rewards_and_success() -> None:
     assert r == pytest.approx(-0.5 - 0.1 + 20.0)
 
 
+def test_the_action_cost_weighs_the_action_norm() -> None:
+    env = PlanningEnv("narrow2d", action_cost=0.25)
+    env.reset(seed=0, options={"problem": Problem(_open_scene(), [0.1, 0.1], [0.9, 0.1])})
+    _, r, _, _, info = env.step(np.array([0.6, 0.8], np.float32))  # |a| = 1, free
+    assert not info["collided"]
+    assert r == pytest.approx(-0.25 * 1.0 - 0.1)
+
+
 def test_tiny_moves_are_checked() -> None:
     env = PlanningEnv("narrow2d")
     scene = _open_scene()

@@ -79,15 +79,18 @@ def _collect(env: PlanningEnv, buffer: EpisodeReplay, episodes: int, rng: np.ran
     return log
 
 
-def test_relabelled_reward_equals_env_reward() -> None:
+@pytest.mark.parametrize("action_cost", [1.0, 0.25])
+def test_relabelled_reward_equals_env_reward(action_cost: float) -> None:
     rng = np.random.default_rng(0)
-    env = PlanningEnv("narrow2d")
+    env = PlanningEnv("narrow2d", action_cost=action_cost)
     robot = env.robot
     buf = EpisodeReplay(2000, (64, 4), 2, 2)
     scenes = _collect(env, buf, 6, rng)
     b = buf.sample(64, rng, her_ratio=1.0)
     assert b.relabelled.mean() > 0.9
-    reward, success = batch_rewards(robot, EnvConfig(), b)
+    reward, success = batch_rewards(robot, EnvConfig(action_cost=action_cost), b)
+    if action_cost != 1.0:  # the weight is applied, not ignored
+        assert not np.allclose(reward, batch_rewards(robot, EnvConfig(), b)[0])
     assert success.any()  # some relabelled goals are reached by their own transition
     episode_of = buf.episode[: len(buf)]
     idx = [int(np.flatnonzero((buf.q[: len(buf)] == b.q[i]).all(1) & (buf.action[: len(buf)] == b.action[i]).all(1))[0]) for i in range(len(b.q))]

@@ -457,6 +457,7 @@ TRAIN_OPTIONS = {
     "mine-episodes": "mine_episodes",
     "pool-size": "pool_size",
     "pool-retries": "pool_retries",
+    "action-cost": "action_cost",
     "lr": "sac.lr",
     "batch-size": "sac.batch_size",
     "gamma": "sac.gamma",

@@ -50,7 +50,7 @@ class RolloutWorker:
         self.cfg = c = from_dict(TrainConfig, cfg)
         scenario = make_scenario(c.env, robot=c.robot)
         self.robot = scenario.robot
-        self.core = BatchedCore(scenario, num_envs, EnvConfig(observation=c.observation, n_points=c.n_points, split="train"))
+        self.core = BatchedCore(scenario, num_envs, EnvConfig(observation=c.observation, n_points=c.n_points, split="train", action_cost=c.action_cost))
         self.rng = np.random.default_rng(np.random.SeedSequence([c.seed, 0x524159, index]))
         torch.manual_seed(int(self.rng.integers(2**31)))
         obs_shape = tuple(self.core.observer.space.shape)

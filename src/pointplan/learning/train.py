@@ -75,6 +75,8 @@ class TrainConfig:
     pool_size: int = field(default=2000, metadata={"min": 1})
     #: retries of a problem after its last failure
     pool_retries: int = 4
+    #: weight of the action's norm in the reward (the paper: 1; see ``EnvConfig.action_cost``)
+    action_cost: float = field(default=1.0, metadata={"min": 0})
 
 
 @dataclass
@@ -218,7 +220,7 @@ def _start(cfg: TrainConfig, run_dir: Path, resume: str | Path | None, remote: A
     """Build the environments, the agent and the buffer; restore ``resume``'s trainer state."""
     run_dir.mkdir(parents=True, exist_ok=True)
     scenario = make_scenario(cfg.env, robot=cfg.robot)
-    env_cfg = EnvConfig(observation=cfg.observation, n_points=cfg.n_points, split="train")
+    env_cfg = EnvConfig(observation=cfg.observation, n_points=cfg.n_points, split="train", action_cost=cfg.action_cost)
     core = BatchedCore(scenario, cfg.num_envs, env_cfg)
     obs_shape = tuple(core.observer.space.shape)
     rng = np.random.default_rng(cfg.seed)
