@@ -220,12 +220,12 @@ def step_parts(planner: Any, problems: list[Problem], reps: int = 200) -> dict[s
     from pointplan.planners import _policy_kernels as K
 
     @numba.njit
-    def loop(kind, reps, q, goal, u, count, n_points, idx, table, s32, wflat, layout, scale, low, high, bc, br, bh, h, y, tmp, ki, tw, nq):  # type: ignore[no-untyped-def]
+    def loop(kind, reps, q, goal, u, count, n_points, idx, pts, nrm, s32, wflat, layout, scale, low, high, bc, br, bh, ws, tw, nq):  # type: ignore[no-untyped-def]
         for _ in range(reps):
             if kind == 0:
                 K._select(u, count, n_points, idx)
             elif kind == 1:
-                K._action(q, goal, idx, table, s32, wflat, layout, scale, 2, h, y, tmp, ki)
+                K._action(q, goal, idx, pts, nrm, s32, wflat, layout, scale, 2, ws)
             elif kind == 2:
                 K._q_free(q, tw, 0.01, low, high, bc, br, bh, 0.01, True, nq)
             elif kind == 3:
@@ -234,7 +234,7 @@ def step_parts(planner: Any, problems: list[Problem], reps: int = 200) -> dict[s
                 K._edge_free(q, goal, 0.01, 0.01, low, high, bc, br, bh)
 
     (wflat, layout), scale, fparams, iparams = planner._net
-    n_points, width = int(iparams[K.I_N_POINTS]), int(layout[0])
+    n_points = int(iparams[K.I_N_POINTS])
     names = ("point draw", "network", "move (q_free)", "goal quick test", "goal certified check")
     out: dict[str, list[float]] = {k: [] for k in names}
     for p in problems:
@@ -245,12 +245,10 @@ def step_parts(planner: Any, problems: list[Problem], reps: int = 200) -> dict[s
         idx = np.empty(n_points, np.int64)
         K._select(u, count, n_points, idx)
         s32 = float(fparams[K.F_S32])
-        table = K._table(pts, nrm, s32, wflat, layout)
-        h, y = np.empty((n_points, width), np.float32), np.empty((n_points, width), np.float32)
-        tmp, ki = np.empty(n_points * width, np.float32), np.empty(n_points * width, np.int32)
+        ws = K._workspace(n_points, layout, 2)
         tw, nq = np.array([0.05, 0.05]), np.empty(2)
         for kind, name in enumerate(names):
-            args = (p.start, p.goal, u, count, n_points, idx, table, s32, wflat, layout, scale, p.scene.low, p.scene.high, *boxes, h, y, tmp, ki, tw, nq)
+            args = (p.start, p.goal, u, count, n_points, idx, pts, nrm, s32, wflat, layout, scale, p.scene.low, p.scene.high, *boxes, ws, tw, nq)
             loop(kind, 1, *args)
             t = time.perf_counter()
             loop(kind, reps, *args)

@@ -102,3 +102,23 @@ def test_compiled_rollout_is_the_python_one(problems: list[Problem]) -> None:
             ):
                 same += 1
         assert same >= len(problems) - 1  # float32 round-off may part a rare failing rollout
+
+
+def test_compiled_plan_keeps_no_state_between_problems(problems: list[Problem]) -> None:
+    """The compiled path keeps the last scene's arguments: planning a problem again, after
+    other scenes or in the same scene, gives the same result; so does a start given as
+    float32 (converted as before)."""
+    robot = Narrow2DScenario().robot
+    planner = make_planner("policy", robot)
+    first = [planner.plan(p) for p in problems[:6]]
+    again = [planner.plan(p) for p in reversed(problems[:6])][::-1]
+    for prob, a, b in zip(problems[:6], first, again, strict=True):
+        assert "compiled" in a.info["time_split"]
+        assert np.array_equal(a.path, b.path) and (a.success, a.nodes, a.collision_checks) == (b.success, b.nodes, b.collision_checks)
+        assert {k: v for k, v in a.info.items() if k != "time_split"} == {k: v for k, v in b.info.items() if k != "time_split"}
+        if a.info["end"] == "goal":
+            assert np.array_equal(a.path[-1], prob.goal)
+    p = problems[0]
+    c = planner.plan(Problem(p.scene, p.start.astype(np.float32).astype(np.float64), p.goal))
+    d = planner.plan(Problem(p.scene, p.start.astype(np.float32), p.goal))
+    assert np.array_equal(c.path, d.path)

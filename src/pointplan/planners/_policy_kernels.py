@@ -10,7 +10,8 @@ for a translating ball (the 2D disc, the 3D sphere) among boxes.
   (grown samples, the start fallback, the bounds), written out on floats: the same
   arithmetic in the same order, so the same verdict and the same counts.
 - :func:`pointnet_action`: the deterministic action of a PointNet actor from the folded
-  first layer (a per-scene table minus one row per step, see ``PolicyPlanner._lean_step``)
+  first layer (the drawn points' input-layer rows minus one row for the position, see
+  ``PolicyPlanner._lean_step``)
   and the observation's draws: the same as
   :meth:`pointplan.models.policy.NumpyPointNetActor.from_first_layer` up to float32
   round-off (the ELU's exponential is a polynomial here, relative error about 1e-7).
@@ -227,35 +228,48 @@ def ball_edge_free(
 
 
 # ------------------------------------------------------------------ the network
+#: the ELU's scratch length: it works through its vector in blocks of this many (the scratch
+#: stays in the L1 cache; a whole ``(n_points, width)`` scratch would be 32 KB more memory
+#: to bring in per call)
+_ELU_BLOCK = 256
+
+
+@_jit_fast
+def _elu(flat, tmp, ki):  # type: ignore[no-untyped-def]
+    """ELU in place of a float32 vector (``tmp``, ``ki``: float32, int32 scratch of
+    ``_ELU_BLOCK``): ``v`` for ``v > 0``, else ``exp(v) - 1`` with ``exp`` as ``2^k p(r)``
+    (Cephes' expf polynomial; relative error about 1e-7), in loops the compiler
+    vectorises."""
+    size = flat.shape[0]
+    scale = ki.view(np.float32)
+    for c0 in range(0, size, _ELU_BLOCK):
+        c1 = min(size, c0 + _ELU_BLOCK)
+        for i in range(c0, c1):
+            v = min(flat[i], np.float32(0.0))
+            v = max(v, np.float32(-87.0))
+            k = np.floor(v * np.float32(1.4426950408889634) + np.float32(0.5))
+            r = v - k * np.float32(0.693359375) - k * np.float32(-2.12194440e-4)
+            p = np.float32(1.9875691500e-4)
+            p = p * r + np.float32(1.3981999507e-3)
+            p = p * r + np.float32(8.3334519073e-3)
+            p = p * r + np.float32(4.1665795894e-2)
+            p = p * r + np.float32(1.6666665459e-1)
+            p = p * r + np.float32(5.0000001201e-1)
+            tmp[i - c0] = p * r * r + r + np.float32(1.0)
+            ki[i - c0] = (np.int32(k) + np.int32(127)) << np.int32(23)
+        for i in range(c0, c1):
+            e = tmp[i - c0] * scale[i - c0] - np.float32(1.0)
+            flat[i] = flat[i] if flat[i] > np.float32(0.0) else e
+
+
 @_jit_fast
 def _elu_bias(x, b, tmp, ki):  # type: ignore[no-untyped-def]
-    """ELU of ``x + b`` in place (``x: (N, W)`` float32, ``b: (W,)``; ``tmp``, ``ki``:
-    scratch of ``N * W`` float32, int32): ``v`` for ``v > 0``, else ``exp(v) - 1`` with
-    ``exp`` as ``2^k p(r)`` (Cephes' expf polynomial; relative error about 1e-7), in loops
-    the compiler vectorises."""
+    """ELU of ``x + b`` in place (``x: (N, W)`` float32, C-contiguous, ``b: (W,)``)."""
     n, width = x.shape
     for p in range(n):
         for o in range(width):
             x[p, o] += b[o]
-    flat = x.reshape(-1)
-    size = flat.shape[0]
-    for i in range(size):
-        v = min(flat[i], np.float32(0.0))
-        v = max(v, np.float32(-87.0))
-        k = np.floor(v * np.float32(1.4426950408889634) + np.float32(0.5))
-        r = v - k * np.float32(0.693359375) - k * np.float32(-2.12194440e-4)
-        p = np.float32(1.9875691500e-4)
-        p = p * r + np.float32(1.3981999507e-3)
-        p = p * r + np.float32(8.3334519073e-3)
-        p = p * r + np.float32(4.1665795894e-2)
-        p = p * r + np.float32(1.6666665459e-1)
-        p = p * r + np.float32(5.0000001201e-1)
-        tmp[i] = p * r * r + r + np.float32(1.0)
-        ki[i] = (np.int32(k) + np.int32(127)) << np.int32(23)
-    scale = ki[:size].view(np.float32)
-    for i in range(size):
-        e = tmp[i] * scale[i] - np.float32(1.0)
-        flat[i] = flat[i] if flat[i] > np.float32(0.0) else e
+    _elu(x.reshape(-1), tmp, ki)
 
 
 @_jit
@@ -303,53 +317,88 @@ def pack_weights(
     return np.ascontiguousarray(np.concatenate(parts), np.float32), np.asarray(layout, np.int64)
 
 
-@_jit_fast
-def _table(pts, nrm, s, wflat, layout):  # type: ignore[no-untyped-def]
-    """The input layer's pre-activations of a scene's points, ``[f32(pts / s), f32(nrm)]
-    @ W + b`` (``nrm`` may have no columns)."""
+@_jit
+def _workspace(n_points, layout, d):  # type: ignore[no-untyped-def]
+    """The scratch arrays of :func:`_action`, allocated once per rollout (not per step):
+    ``(h, y)``: ``(n_points, width)`` float32 activations; ``(tmp, ki)``: the ELU's
+    float32 and int32 scratch; ``vec``: float32 room for the small vectors (the position
+    row and the point's features, then the head's input row and two ping-pong rows)."""
     width, features = layout[0], layout[1]
-    count, d = pts.shape
-    e = nrm.shape[1]
-    out = np.empty((count, width), np.float32)
-    x = np.empty(features, np.float32)
-    for p in range(count):
-        for i in range(d):
-            x[i] = np.float32(pts[p, i] / s)
-        for j in range(e):
-            x[d + j] = np.float32(nrm[p, j])
-        for o in range(width):
-            out[p, o] = wflat[features * width + o]
-        for i in range(features):
-            xi = x[i]
-            for o in range(width):
-                out[p, o] += xi * wflat[i * width + o]
-    return out
+    head = width + d
+    for li in range(layout[3]):
+        head = max(head, layout[5 + 2 * li])
+    h = np.empty((n_points, width), np.float32)
+    y = np.empty((n_points, width), np.float32)
+    tmp, ki = np.empty(_ELU_BLOCK, np.float32), np.empty(_ELU_BLOCK, np.int32)
+    vec = np.empty(width + features + 3 * head, np.float32)
+    return h, y, tmp, ki, vec
 
 
 @_jit_fast
-def _action(q, goal, idx, table, s32, wflat, layout, scale, action_dim, h, y, tmp, ki):  # type: ignore[no-untyped-def]
-    """The actor's action (float32) for the drawn points ``idx``: the first layer from
-    the per-scene ``table`` minus ``(q / s32) @ W[:d]`` (see ``PolicyPlanner._lean_step``),
-    ELU, the hidden layers (residual, the last max-pooled), the head on ``[pooled, (goal
-    - q) / scale]``, ``tanh`` of the first ``action_dim`` outputs. ``h``, ``y``: ``(n,
-    width)`` float32 scratch, ``tmp``, ``ki``: ``n * width`` float32, int32 scratch."""
+def _first_layer(q, idx, pts, nrm, s32, wflat, layout, h, vec):  # type: ignore[no-untyped-def]
+    """The input layer's pre-activations of the drawn points ``idx`` seen from ``q``,
+    folded (see ``PolicyPlanner._lean_step``): ``[f32(pts / s), f32(nrm)] @ W + b`` of
+    each drawn point minus the row ``f32(q / s) @ W[:d]``, with the products summed in the
+    same order as the per-scene table of ``PolicyPlanner._fold`` (into ``h``; ``vec``:
+    scratch of ``width + features``). Computed for the drawn points only: a rollout of a
+    few steps sees fewer points than a scene has, and no table has to be written."""
+    width, features = layout[0], layout[1]
     d = q.shape[0]
-    n = h.shape[0]
-    width, features, n_hidden, n_head = layout[0], layout[1], layout[2], layout[3]
-    row = np.zeros(width, np.float32)
+    e = nrm.shape[1]
+    row = vec[:width]
+    x = vec[width : width + features]
+    for o in range(width):
+        row[o] = 0.0
     for i in range(d):
         qi = np.float32(q[i] / s32)
         for o in range(width):
             row[o] += qi * wflat[i * width + o]
-    for p in range(n):
+    for p in range(h.shape[0]):
         src = idx[p]
+        for i in range(d):
+            x[i] = np.float32(pts[src, i] / s32)
+        for j in range(e):
+            x[d + j] = np.float32(nrm[src, j])
         for o in range(width):
-            h[p, o] = table[src, o] - row[o]
-    zero = np.zeros(width, np.float32)
-    _elu_bias(h, zero, tmp, ki)
+            h[p, o] = wflat[features * width + o]
+        for i in range(features):
+            xi = x[i]
+            for o in range(width):
+                h[p, o] += xi * wflat[i * width + o]
+        for o in range(width):
+            h[p, o] -= row[o]
+
+
+@_jit_fast
+def _dense_row(z, w, b, out):  # type: ignore[no-untyped-def]
+    """``out = z @ w + b`` for one row ``z: (k,)``, ``w: (k, m)``, into ``out`` (no
+    allocation). The product goes through BLAS as a ``1 x k`` matrix, as ``np.dot`` of
+    the row did before: a loop here sums in another order and moves the actions by about
+    1e-6."""
+    m = out.shape[0]
+    np.dot(z.reshape(1, z.shape[0]), w, out.reshape(1, m))
+    for o in range(m):
+        out[o] += b[o]
+
+
+@_jit_fast
+def _action(q, goal, idx, pts, nrm, s32, wflat, layout, scale, action_dim, ws):  # type: ignore[no-untyped-def]
+    """The actor's action (float32, a view into ``ws``) for the drawn points ``idx``: the
+    folded first layer (:func:`_first_layer`), ELU, the hidden layers (residual, the last
+    max-pooled), the head on ``[pooled, (goal - q) / scale]``, ``tanh`` of the first
+    ``action_dim`` outputs. ``ws``: :func:`_workspace` (nothing is allocated here)."""
+    h, y, tmp, ki, vec = ws
+    d = q.shape[0]
+    n = h.shape[0]
+    width, features, n_hidden, n_head = layout[0], layout[1], layout[2], layout[3]
+    _first_layer(q, idx, pts, nrm, s32, wflat, layout, h, vec)
+    _elu(h.reshape(-1), tmp, ki)  # (the first layer's bias is in h already)
     off_w = features * width + width
     off_b = off_w + n_hidden * width * width
-    pooled = np.empty(width, np.float32)
+    rows = vec[width + features :]  # the head's input and output rows
+    head = rows.shape[0] // 3
+    z = rows[: width + d]
+    pooled = z[:width]
     if n_hidden == 0:
         for o in range(width):
             pooled[o] = h[0, o]
@@ -371,28 +420,24 @@ def _action(q, goal, idx, table, s32, wflat, layout, scale, action_dim, h, y, tm
                     pooled[o] = max(pooled[o], y[p, o])
             for o in range(width):
                 pooled[o] += b[o]
-    z = np.empty((1, width + d), np.float32)
-    for o in range(width):
-        z[0, o] = pooled[o]
     for i in range(d):
-        z[0, width + i] = np.float32((goal[i] - q[i]) / scale[i])
+        z[width + i] = np.float32((goal[i] - q[i]) / scale[i])
     off = off_b + n_hidden * width
+    src, dst = 0, head
     for li in range(n_head):
         k_in, k_out = layout[4 + 2 * li], layout[5 + 2 * li]
         w = wflat[off : off + k_in * k_out].reshape(k_in, k_out)
         off += k_in * k_out
-        out = np.dot(z, w)
         b = wflat[off : off + k_out]
         off += k_out
+        out = rows[dst : dst + k_out]
+        _dense_row(rows[src : src + k_in], w, b, out)
         if li < n_head - 1:
-            _elu_bias(out, b, tmp, ki)
-        else:
-            for o in range(k_out):
-                out[0, o] += b[o]
-        z = out
-    a = np.empty(action_dim, np.float32)
+            _elu(out, tmp, ki)
+        src, dst = dst, (head if dst != head else 2 * head)
+    a = rows[src : src + action_dim]
     for i in range(action_dim):
-        a[i] = np.tanh(z[0, i])
+        a[i] = np.tanh(a[i])
     return a
 
 
@@ -409,16 +454,13 @@ def pointnet_action(
     scale: np.ndarray,
     action_dim: int,
 ) -> np.ndarray:
-    """One action of the folded PointNet actor (:func:`_table`, :func:`_select`,
-    :func:`_action`) for the scene's points ``pts`` (world frame), normals ``nrm`` (``(count,
-    0)`` without) and the draws ``u``."""
+    """One action of the folded PointNet actor (:func:`_select`, :func:`_action`) for the
+    scene's points ``pts`` (world frame), normals ``nrm`` (``(count, 0)`` without) and the
+    draws ``u``."""
     idx = np.empty(n_points, np.int64)
     _select(u, len(pts), n_points, idx)
-    table = _table(pts, nrm, float(s32), wflat, layout)
-    width = int(layout[0])
-    h, y = np.empty((n_points, width), np.float32), np.empty((n_points, width), np.float32)
-    tmp, ki = np.empty(n_points * width, np.float32), np.empty(n_points * width, np.int32)
-    return _action(q, goal, idx, table, float(s32), wflat, layout, scale, int(action_dim), h, y, tmp, ki)
+    ws = _workspace(n_points, layout, len(q))
+    return _action(q, goal, idx, pts, nrm, float(s32), wflat, layout, scale, int(action_dim), ws).copy()
 
 
 # ------------------------------------------------------------------ a whole rollout
@@ -436,10 +478,11 @@ I_HORIZON, I_STALL_STEPS, I_GREEDY, I_CONNECT, I_CLIP, I_N_POINTS, I_ACTION_DIM 
 
 
 @_jit
-def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, scale, fparams, iparams, stream, path, counters):  # type: ignore[no-untyped-def]
-    """A rollout of ``PolicyPlanner.plan`` (see :func:`rollout_ball`); writes the policy's
-    configurations to ``path`` and ``(steps, checks, certified goal edges)`` to
-    ``counters``; returns the end code."""
+def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, scale, fparams, iparams, stream, path):  # type: ignore[no-untyped-def]
+    """A rollout of ``PolicyPlanner.plan`` (see :func:`rollout_ball`): writes the path to
+    ``path`` (``horizon + 2`` rows: the policy's configurations, then the goal when the
+    path ends there) and returns ``(end code, rows of path, checks, certified goal
+    edges)`` (plain integers: nothing to unpack from an array afterwards)."""
     radius, substep, goal_tol = fparams[F_RADIUS], fparams[F_SUBSTEP], fparams[F_GOAL_TOL]
     stall_dist, resolution, s32 = fparams[F_STALL_DIST], fparams[F_RESOLUTION], fparams[F_S32]
     horizon, stall_steps, n_points, action_dim = iparams[I_HORIZON], iparams[I_STALL_STEPS], iparams[I_N_POINTS], iparams[I_ACTION_DIM]
@@ -448,12 +491,8 @@ def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, 
     count = pts.shape[0]
     m = count if count > 1 else 1
     blk = m + n_points
-    table = _table(pts, nrm, s32, wflat, layout)
     idx = np.empty(n_points, np.int64)
-    h = np.empty((n_points, layout[0]), np.float32)
-    y = np.empty((n_points, layout[0]), np.float32)
-    size = max(n_points * layout[0], np.max(layout[4:]))
-    tmp, ki = np.empty(size, np.float32), np.empty(size, np.int32)
+    ws = _workspace(n_points, layout, d)
     tw = np.empty(d)
     new_q = np.empty(d)
     filt_r = radius * (1.0 - 1e-9)
@@ -477,9 +516,8 @@ def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, 
                     break
         if t >= horizon or end == END_STALLED:
             break
-        u = stream[t * blk : (t + 1) * blk]
-        _select(u, count, n_points, idx)
-        a = _action(q, goal, idx, table, s32, wflat, layout, scale, action_dim, h, y, tmp, ki)
+        _select(stream[t * blk : (t + 1) * blk], count, n_points, idx)
+        a = _action(q, goal, idx, pts, nrm, s32, wflat, layout, scale, action_dim, ws)
         _clip_twist(a, scale, tw)
         hit, c = _q_free(q, tw, radius, low, high, box_c, box_r, box_h, substep, clip_target, new_q)
         checks += c
@@ -504,10 +542,12 @@ def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, 
                 end = END_STALLED  # the goal is still tried from here (greedy)
                 if not greedy:
                     break
-    counters[0] = t
-    counters[1] = checks
-    counters[2] = certified
-    return end
+    rows = t + 1
+    if end == END_GREEDY or end == END_TOL_GOAL:  # the path ends at the goal
+        for i in range(d):
+            path[rows, i] = goal[i]
+        rows += 1
+    return end, rows, checks, certified
 
 
 def rollout_ball(
@@ -533,12 +573,10 @@ def rollout_ball(
 
     ``boxes``: ``(centres, rotations, half sides)``; ``pts``, ``nrm``: the observer's
     points of the scene and their normals (``(count, 0)`` without); ``weights``: :func:`pack_weights`;
-    ``fparams``, ``iparams``: the ``F_*``, ``I_*`` entries. Returns ``(end code, the
-    policy's configurations (start first), collision checks, certified goal-edge checks
-    made)``."""
-    horizon = int(iparams[I_HORIZON])
-    path = np.empty((horizon + 1, len(q0)))
-    counters = np.zeros(3, np.int64)
-    end = _rollout(q0, goal, low, high, boxes[0], boxes[1], boxes[2], pts, nrm, weights[0], weights[1], scale, fparams, iparams, stream, path, counters)
-    steps = int(counters[0])
-    return int(end), path[: steps + 1], int(counters[1]), int(counters[2])
+    ``fparams``, ``iparams``: the ``F_*``, ``I_*`` entries. Returns ``(end code, the path
+    (the policy's configurations, start first, then the goal when it ends there),
+    collision checks, certified goal-edge checks made)``. (``PolicyPlanner`` calls
+    :func:`_rollout` directly, with its arguments prepared once.)"""
+    path = np.empty((int(iparams[I_HORIZON]) + 2, len(q0)))
+    end, rows, checks, certified = _rollout(q0, goal, low, high, *boxes, pts, nrm, *weights, scale, fparams, iparams, stream, path)
+    return int(end), path[:rows], int(checks), int(certified)

@@ -44,6 +44,7 @@ from .base import PlanResult
 from .edges import edge_free
 
 ActFn = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+_F64 = np.dtype(np.float64)
 
 
 class _GivenProblems(Scenario):
@@ -303,6 +304,16 @@ class PolicyPlanner:
         self.fast = policy.fast_actor()
         self._net: tuple[Any, ...] | None = self._kernel_weights() if self.compiled else None
         self._observer: Any = None
+        #: the compiled rollout's planner arguments (weights, scale, parameters), set with
+        #: the observer when the compiled rollout applies to it; else None
+        self._kernel_args: tuple[Any, ...] | None = None
+        #: the compiled rollout's scene arguments of the last scene planned in (a scene is
+        #: usually planned in many times; ``None``: the compiled rollout does not apply)
+        self._kernel_scene: Scene | None = None
+        self._kernel_scene_args: tuple[np.ndarray, ...] | None = None
+        self._kernel: Callable[..., tuple[int, int, int, int]] | None = None
+        self._end_entries = self._end_table()
+        self._path_shape = (self.horizon + 2, self.robot.config_dim)  # the compiled rollout's path buffer
         self._stream_rng: np.random.Generator | None = None
         self._stream = np.empty(0)
 
@@ -312,11 +323,34 @@ class PolicyPlanner:
                 raise ValueError("observer_wrapper and draws > 1 plan static scenes only")
             return self._plan_batched(problem)
         if self._observer is None:
-            probe = BatchedCore(_GivenProblems(self.robot, self.horizon), 1, replace(self.env, horizon=self.horizon))
-            self._observer = probe.observer if self.observer_wrapper is None else self.observer_wrapper(probe.observer)
+            self._make_observer()
+        if self._kernel_args is not None:
+            res = self._rollout_compiled(problem)
+            if res is not None:
+                return res
         if not isinstance(self._observer, PointSetObserver) or type(self._observer).observe is not PointSetObserver.observe:
             return self._plan_batched(problem)
         return self._rollout_one(problem)
+
+    def _make_observer(self) -> None:
+        """The observer of ``plan`` (the environment's, wrapped with ``observer_wrapper``)
+        and, when the compiled rollout applies (one draw per step of the plain point
+        observer, the network in numpy, a ball robot), its planner arguments."""
+        from . import _policy_kernels as K
+
+        probe = BatchedCore(_GivenProblems(self.robot, self.horizon), 1, replace(self.env, horizon=self.horizon))
+        observer = probe.observer if self.observer_wrapper is None else self.observer_wrapper(probe.observer)
+        self._observer = observer
+        plain = (
+            isinstance(observer, PointSetObserver)
+            and type(observer).observe is PointSetObserver.observe
+            and type(observer).observe_one is PointSetObserver.observe_one
+        )
+        if self._net is not None and self.draws == 1 and self.observer_wrapper is None and plain:
+            (wflat, layout), scale, fparams, iparams = self._net
+            iparams[K.I_N_POINTS] = self._observer.n_points  # the observer's (the env may leave it to the observer)
+            self._kernel_args = (wflat, layout, scale, fparams, iparams)
+            self._kernel = K._rollout
 
     def _plan_batched(self, problem: Problem) -> PlanResult:
         with torch_threads(1):
@@ -423,9 +457,9 @@ class PolicyPlanner:
         return K.pack_weights(fast.inp, fast.hidden, fast.head), np.ascontiguousarray(robot.action_scale, np.float64), fparams, iparams
 
     def _scene_inputs(self, scene: Scene) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
-        """For the compiled rollout: the observer's points of the scene, their normals
-        (``(count, 0)`` without) and the scene's boxes; ``None`` when the scene has
-        obstacles other than boxes or no points."""
+        """For the compiled rollout: the observer's points of the scene (the observer must be
+        bound to it), their normals (``(count, 0)`` without) and the scene's boxes; ``None``
+        when the scene has obstacles other than boxes or no points."""
         world = scene.world
         obstacles = scene.obstacles
         if world.batch_shape != () or world.box_c.shape[0] != len(obstacles) or not all(type(o) is Box for o in obstacles):
@@ -437,49 +471,73 @@ class PolicyPlanner:
         nrm = f(nrm, np.float64) if self._observer.with_normals else np.zeros((len(pts), 0))
         return f(pts, np.float64), nrm, (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
 
-    def _rollout_compiled(self, problem: Problem, pts: np.ndarray, nrm: np.ndarray, boxes: tuple[np.ndarray, np.ndarray, np.ndarray], t0: float) -> PlanResult:
-        """``_rollout_one`` in one compiled call (:func:`~._policy_kernels.rollout_ball`):
-        a ball among boxes, one draw per step, the numpy network."""
+    def _rollout_compiled(self, problem: Problem) -> PlanResult | None:
+        """``_rollout_one`` in one compiled call (:func:`~._policy_kernels._rollout`) for a
+        ball among boxes; ``None`` when the scene is not boxes only (or has no points).
+
+        Most of a call's time beyond the network is not arithmetic but memory: a caller
+        does other work between plans, and every Python and numpy operation here then
+        waits for code and data the call has not touched for a while (measured: a plain
+        ``np.empty`` or ``np.asarray`` takes 5-15 us in that state instead of 0.2). So
+        this path does as few operations as it can: the kernel's arguments are prepared
+        once per planner and per scene (the last scene's are kept), the kernel writes the
+        whole path (the goal included) into one array and returns plain integers, and the
+        result's ``info`` comes from a per-end-code table."""
+        t0 = time.perf_counter()
+        scene = problem.scene
+        if scene is not self._kernel_scene:
+            self._kernel_scene_args = self._kernel_scene_inputs(scene)
+            self._kernel_scene = scene
+        args = self._kernel_scene_args
+        if args is None:
+            return None
+        start, goal = problem.start, problem.goal
+        if start.dtype is not _F64 or goal.dtype is not _F64:
+            start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
+        if start.shape != self._path_shape[1:]:
+            raise ValueError(f"problem {problem.tag or ''} does not fit robot {self.robot.name}")
+        path = np.empty(self._path_shape)
+        assert self._kernel is not None
+        t1 = time.perf_counter()
+        end, rows, checks, _ = self._kernel(start, goal, *args, path)
+        t2 = time.perf_counter()
+        success, to_goal, entries = self._end_entries[end]
+        steps = rows - 1 - to_goal
+        info = {"time_split": {"observe": 0.0, "network": 0.0, "motion": 0.0, "goal": 0.0, "compiled": t2 - t1, "steps": steps}, **entries}
+        return PlanResult(path[:rows], success, steps, checks, time.perf_counter() - t0, info=info)
+
+    def _kernel_scene_inputs(self, scene: Scene) -> tuple[np.ndarray, ...] | None:
+        """The compiled rollout's arguments after the start and the goal, for ``scene``
+        (its bounds and boxes, the observer's points, the planner's arguments, the random
+        stream long enough for the scene), or ``None`` when it does not apply."""
+        assert self._kernel_args is not None
+        self._observer.set_scene(0, scene)
+        inputs = self._scene_inputs(scene)
+        if inputs is None:
+            return None
+        pts, nrm, boxes = inputs
+        stream = self._uniforms(self.horizon * (max(len(pts), 1) + self._observer.n_points))
+        return (scene.low, scene.high, *boxes, pts, nrm, *self._kernel_args, stream)
+
+    def _end_table(self) -> tuple[tuple[bool, bool, dict[str, Any]], ...]:
+        """Per end code of the compiled rollout (``_policy_kernels.END_*``): success, whether
+        the path ends at the goal, and the ``info`` entries of the result (those
+        ``_rollout_one`` sets)."""
         from . import _policy_kernels as K
 
-        assert self._net is not None
-        scene = problem.scene
-        weights, scale, fparams, iparams = self._net
-        n_points = self._observer.n_points
-        blk = max(len(pts), 1) + n_points
-        iparams[K.I_N_POINTS] = n_points  # the observer's (the env may leave it to the observer)
-        goal = np.asarray(problem.goal, np.float64)
-        t1 = time.perf_counter()
-        end, path, checks, _ = K.rollout_ball(
-            np.asarray(problem.start, np.float64),
-            goal,
-            scene.low,
-            scene.high,
-            boxes,
-            pts,
-            nrm,
-            weights,
-            scale,
-            fparams,
-            iparams,
-            self._uniforms(self.horizon * blk),
-        )
-        t2 = time.perf_counter()
-        steps = len(path) - 1
-        to_goal = end == K.END_GREEDY or end == K.END_TOL_GOAL
-        success = to_goal or end == K.END_TOL_BLOCKED or end == K.END_TOL
-        res = PlanResult(path=np.concatenate([path, goal[None]]) if to_goal else path, success=success, nodes=steps, collision_checks=checks, time_s=0.0)
-        info = res.info
-        info["time_split"] = {"observe": 0.0, "network": 0.0, "motion": 0.0, "goal": 0.0, "compiled": t2 - t1, "steps": steps}
-        info["end"] = _END_NAMES[end]
-        if end == K.END_GREEDY:
-            info["greedy_goal"] = True
-        if to_goal or end == K.END_TOL_BLOCKED:
-            info["goal_connection"] = "free" if to_goal else "blocked"
-        elif self.connect_goal and not success:
-            info["goal_connection"] = None
-        res.time_s = time.perf_counter() - t0
-        return res
+        rows = []
+        for end, name in enumerate(_END_NAMES):
+            to_goal = end in (K.END_GREEDY, K.END_TOL_GOAL)
+            success = to_goal or end in (K.END_TOL_BLOCKED, K.END_TOL)
+            entries: dict[str, Any] = {"end": name}
+            if end == K.END_GREEDY:
+                entries["greedy_goal"] = True
+            if to_goal or end == K.END_TOL_BLOCKED:
+                entries["goal_connection"] = "free" if to_goal else "blocked"
+            elif self.connect_goal and not success:
+                entries["goal_connection"] = None
+            rows.append((success, to_goal, entries))
+        return tuple(rows)
 
     def _goal_tester(self, scene: Scene, goal: np.ndarray) -> _GoalTester:
         return _GoalTester(self.robot, scene, goal)
@@ -504,10 +562,6 @@ class PolicyPlanner:
         if problem.start.shape != (robot.config_dim,):
             raise ValueError(f"problem {problem.tag or ''} does not fit robot {robot.name}")
         self._observer.set_scene(0, scene)
-        if self._net is not None and self.draws == 1 and self.observer_wrapper is None and type(self._observer).observe_one is PointSetObserver.observe_one:
-            inputs = self._scene_inputs(scene)
-            if inputs is not None:
-                return self._rollout_compiled(problem, *inputs, t0)
         lean = self._lean_step()
         goal = np.asarray(problem.goal, np.float64)
         q = np.asarray(problem.start, np.float64).copy()
