@@ -307,3 +307,80 @@ def test_metrics_csv_keeps_columns_aligned_when_new_ones_appear(tmp_path: Path) 
     assert [r["critic_loss"] for r in rows] == ["3.0", "2.0", "1.0"]
     assert [r["val_success"] for r in rows] == ["0.5", "0.6", "0.7"]
     assert [r["pool_size"] for r in rows] == ["", "7.0", "5.0"]
+
+
+def test_cloning_term_pulls_the_actor_to_the_demonstrations() -> None:
+    """``bc_weight``: the actor's mean action moves towards the expert's on the
+    demonstration batch (and without demonstrations no cloning loss is reported)."""
+    from dataclasses import replace
+
+    from pointplan.learning.sac import SAC, DemoBatch, SACConfig
+
+    rng = np.random.default_rng(0)
+    torch.manual_seed(0)
+    env = PlanningEnv("narrow2d")
+    buf = EpisodeReplay(500, (64, 4), 2, 2)
+    _collect(env, buf, 2, rng)
+    own = replace(SMALL, shared_encoder=False, critic_action="points")
+    sac = SAC(env.robot, EnvConfig(), (64, 4), own, SACConfig(batch_size=32, bc_weight=10.0, lr=1e-3))
+    demo_obs = torch.as_tensor(rng.normal(size=(32, 64, 4)), dtype=torch.float32)
+    demo = DemoBatch(demo_obs, torch.as_tensor(rng.normal(size=(32, 2)), dtype=torch.float32), torch.full((32, 2), 0.7))
+
+    def gap() -> float:
+        with torch.no_grad():
+            return float(((sac.actor.act(demo.obs, demo.goal) - demo.action) ** 2).sum(-1).mean())
+
+    before = gap()
+    losses = [sac.update(buf.sample(32, rng), demo)["bc_loss"] for _ in range(60)]
+    assert losses[0] == pytest.approx(before, rel=1e-4)
+    assert gap() < 0.2 * before
+    assert "bc_loss" not in sac.update(buf.sample(32, rng))
+
+
+def test_q_filter_keeps_only_steps_where_the_expert_is_rated_higher() -> None:
+    from dataclasses import replace
+
+    from pointplan.learning.sac import SAC, DemoBatch, SACConfig
+
+    torch.manual_seed(0)
+    own = replace(SMALL, shared_encoder=False, critic_action="points")
+    sac = SAC(Disc2D(), EnvConfig(), (64, 4), own, SACConfig(bc_weight=1.0, bc_q_filter=True))
+
+    class Rates(torch.nn.Module):  # Q = -|a|^2: small actions are rated higher
+        def forward(self, obs, goal, action, features=None):  # type: ignore[no-untyped-def]
+            q = -(action**2).sum(-1)
+            return q, q
+
+    sac.critic = Rates()
+    rng = np.random.default_rng(1)
+    obs = torch.as_tensor(rng.normal(size=(8, 64, 4)), dtype=torch.float32)
+    goal = torch.as_tensor(rng.normal(size=(8, 2)), dtype=torch.float32)
+    expert = torch.zeros(8, 2)
+    expert[4:] = 0.99  # rated below any actor action of smaller norm
+    with torch.no_grad():
+        mean = sac.actor.act(obs, goal)
+    assert float(mean.abs().max()) < 0.9  # (so the split below is the filter's)
+    err = ((mean - expert) ** 2).sum(-1)
+    loss = sac._cloning_loss(DemoBatch(obs, goal, expert))
+    torch.testing.assert_close(loss, err[:4].mean())
+    sac.cfg = replace(sac.cfg, bc_q_filter=False)
+    torch.testing.assert_close(sac._cloning_loss(DemoBatch(obs, goal, expert)), err.mean())
+
+
+def test_training_with_a_cloning_term(tmp_path: Path) -> None:
+    """``--demos`` + ``--bc-weight`` through the training loop; a clear error without them."""
+    from pointplan.learning.bc import save_demos
+    from pointplan.learning.sac import SACConfig
+    from pointplan.scenes.scenarios import make_scenario
+
+    scenario = make_scenario("empty2d")
+    demos = generate_demos(scenario, 10, seed=0, progress=False)
+    save_demos(tmp_path / "demos.npz", scenario, demos, "train", 0)
+    sac = SACConfig(batch_size=32, bc_weight=1.0)
+    cfg = TrainConfig(env="empty2d", num_envs=4, total_steps=300, warmup_steps=100, eval_every=300, eval_episodes=5, net=SMALL, sac=sac)
+    with pytest.raises(ValueError, match="--demos"):
+        train(cfg, tmp_path / "a", progress=False)
+    from dataclasses import replace
+
+    res = train(replace(cfg, demos=str(tmp_path / "demos.npz")), tmp_path / "b", progress=False)
+    assert "bc_loss" in res.history[-1] and np.isfinite(res.history[-1]["bc_loss"])

@@ -22,6 +22,16 @@ from ..robots.base import Robot
 from .replay import Batch
 
 
+@dataclass
+class DemoBatch:
+    """Demonstration steps for the cloning term: observations and goal vectors as network
+    inputs, and the expert's actions in [-1, 1]."""
+
+    obs: torch.Tensor
+    goal: torch.Tensor
+    action: torch.Tensor
+
+
 @dataclass(frozen=True)
 class SACConfig:
     """SAC hyperparameters; defaults are the paper's."""
@@ -49,6 +59,14 @@ class SACConfig:
     #: gradient step; when > 0 the averaged actor is the one evaluated and saved as the policy
     #: (0: off). 3e-5 averages over roughly the last 30,000 updates.
     policy_avg: float = 0.0
+    #: weight of a behavioural-cloning term in the actor's loss: the squared distance from
+    #: the actor's mean action to the expert's on a batch of demonstration steps (0: off;
+    #: needs demonstrations, ``TrainConfig.demos``). Keeps the actor near the demonstrations
+    #: while the critics are poor (as in Nair et al. 2018 and TD3+BC)
+    bc_weight: float = field(default=0.0, metadata={"min": 0})
+    #: apply the cloning term only where the critics rate the expert's action above the
+    #: actor's (Nair et al.'s Q-filter)
+    bc_q_filter: bool = False
 
 
 def batch_rewards(robot: Robot, env: EnvConfig, b: Batch) -> tuple[np.ndarray, np.ndarray]:
@@ -113,7 +131,9 @@ class SAC:
         return a.cpu().numpy()
 
     # ------------------------------------------------------------------ update
-    def update(self, b: Batch) -> dict[str, float]:
+    def update(self, b: Batch, demo: DemoBatch | None = None) -> dict[str, float]:
+        """One gradient step; ``demo`` adds the cloning term (``cfg.bc_weight``) to the
+        actor's loss."""
         reward, success = batch_rewards(self.robot, self.env, b)
         obs, next_obs = self.observations(b.obs), self.observations(b.next_obs)
         g, g_next = self.goal_vectors(b.q, b.goal), self.goal_vectors(b.q_next, b.goal)
@@ -148,6 +168,11 @@ class SAC:
         a_pi, logp = self.actor.sample(obs, g, h_pi)
         q1p, q2p = self.critic(obs, g, a_pi, h_pi)
         actor_loss = (alpha * logp - torch.min(q1p, q2p)).mean()
+        extra: dict[str, float] = {}
+        if demo is not None and self.cfg.bc_weight > 0:
+            bc = self._cloning_loss(demo)
+            extra["bc_loss"] = bc.item()
+            actor_loss = actor_loss + self.cfg.bc_weight * bc
         self.actor_opt.zero_grad(set_to_none=True)
         actor_loss.backward()
         self.actor_opt.step()
@@ -167,7 +192,22 @@ class SAC:
             "alpha": float(alpha),
             "q_mean": q1.mean().item(),
             "entropy": -logp.mean().item(),
+            **extra,
         }
+
+    def _cloning_loss(self, demo: DemoBatch) -> torch.Tensor:
+        """Mean squared distance (summed over the action's axes) from the actor's mean
+        action to the expert's; with the Q-filter, only over the steps where the critics
+        (frozen here) prefer the expert's action."""
+        mean_action = self.actor.act(demo.obs, demo.goal)
+        err = ((mean_action - demo.action) ** 2).sum(-1)
+        if not self.cfg.bc_q_filter:
+            return err.mean()
+        with torch.no_grad():
+            q_expert = torch.min(*self.critic(demo.obs, demo.goal, demo.action))
+            q_actor = torch.min(*self.critic(demo.obs, demo.goal, mean_action.detach()))
+            keep = (q_expert > q_actor).float()
+        return (err * keep).sum() / keep.sum().clamp(min=1.0)
 
     @torch.no_grad()
     def _soft_update(self) -> None:

@@ -31,7 +31,7 @@ from ..scenes.scenarios import make_scenario
 from ..scenes.scene import Problem
 from .curriculum import EpisodeSource, FailurePool
 from .replay import EpisodeReplay
-from .sac import SAC, SACConfig
+from .sac import SAC, DemoBatch, SACConfig
 
 
 @dataclass(frozen=True)
@@ -77,6 +77,11 @@ class TrainConfig:
     pool_retries: int = 4
     #: weight of the action's norm in the reward (the paper: 1; see ``EnvConfig.action_cost``)
     action_cost: float = field(default=1.0, metadata={"min": 0})
+    #: a demonstrations file (written by ``pointplan bc --demos``) for the actor's cloning
+    #: term (``--bc-weight``)
+    demos: str | None = None
+    #: gradient steps between two fresh draws of the demonstrations' observation subsets
+    demo_refresh: int = field(default=20_000, metadata={"min": 1})
 
 
 @dataclass
@@ -206,6 +211,11 @@ class _Run:
     history: list[dict[str, float]] = field(default_factory=list)
     t_start: float = 0.0
     next_eval: int = 0
+    demos: Any = None
+    demo_obs: Any = None
+    demo_goal: Any = None
+    demo_action: Any = None
+    demo_drawn_at: int = -1
 
     @property
     def wall(self) -> float:
@@ -241,12 +251,47 @@ def _start(cfg: TrainConfig, run_dir: Path, resume: str | Path | None, remote: A
     if cfg.retry_failures > 0 or cfg.mine_episodes > 0:
         run.pool = FailurePool(cfg.pool_size, cfg.pool_retries)
     run.source = EpisodeSource(core, run.pool, cfg.retry_failures)
+    if cfg.sac.bc_weight > 0:
+        _load_demos(run)
     if remote is None:  # (rollout workers start their own environments)
         run.source.reset(range(cfg.num_envs), rng)
         run.obs = core.observe(rng)["observation"]
     run.t_start = time.perf_counter()
     run.next_eval = (run.steps // cfg.eval_every + 1) * cfg.eval_every
     return run
+
+
+def _load_demos(run: _Run) -> None:
+    """The demonstrations of ``cfg.demos`` for the actor's cloning term."""
+    from ..models.inputs import goal_input
+    from .bc import load_demos
+
+    cfg, robot = run.cfg, run.scenario.robot
+    if not cfg.demos:
+        raise ValueError("--bc-weight needs demonstrations: give --demos FILE (written by `pointplan bc --demos FILE`)")
+    if not Path(cfg.demos).exists():
+        raise FileNotFoundError(f"--demos {cfg.demos}: no such file (write one with `pointplan bc --demos {cfg.demos}`)")
+    run.demos = load_demos(cfg.demos, run.scenario)
+    agent = run.agent
+    run.demo_goal = agent.tensor(goal_input(robot, run.demos.q, run.demos.goal))
+    run.demo_action = agent.tensor(run.demos.action)
+
+
+def _demo_batch(run: _Run) -> DemoBatch | None:
+    """A batch of demonstration steps (observations drawn anew every ``demo_refresh``
+    gradient steps)."""
+    if run.demos is None:
+        return None
+    from ..models.inputs import obs_input
+    from .bc import observe_demos
+
+    agent, cfg = run.agent, run.cfg
+    if run.demo_obs is None or agent.updates - run.demo_drawn_at >= cfg.demo_refresh:
+        robot = run.scenario.robot
+        run.demo_obs = agent.tensor(obs_input(robot, observe_demos(run.demos, robot, run.env_cfg, run.rng)))
+        run.demo_drawn_at = agent.updates
+    idx = torch.as_tensor(run.rng.integers(0, len(run.demos), cfg.sac.batch_size), device=agent.device)
+    return DemoBatch(run.demo_obs[idx], run.demo_goal[idx], run.demo_action[idx])
 
 
 def _resume(run: _Run, path: str | Path) -> None:
@@ -316,7 +361,8 @@ def _learn(run: _Run, collected: int) -> None:
     if run.steps >= cfg.warmup_steps and len(run.buffer) >= cfg.sac.batch_size:
         run.credit += collected * cfg.updates_per_step
         while run.credit >= 1.0:
-            run.last_losses = run.agent.update(run.buffer.sample(cfg.sac.batch_size, run.rng, cfg.sac.her_ratio))
+            demo = _demo_batch(run) if run.agent.updates >= cfg.sac.actor_delay else None
+            run.last_losses = run.agent.update(run.buffer.sample(cfg.sac.batch_size, run.rng, cfg.sac.her_ratio), demo)
             run.credit -= 1.0
 
 

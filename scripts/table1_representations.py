@@ -1,0 +1,234 @@
+"""The paper's Table 1 on 2D-Narrow: obstacle representations x learning method.
+
+Five (observation, encoder) pairs, each learnt by behavioural cloning (BC) and by SAC + HER
+from scratch (RL), under one budget per method that this machine can afford (the paper's:
+BC on 1e6 expert steps for 200 epochs, RL for 1e6 environment steps). Every cell is
+selected on the validation split (200 problems) and evaluated once on the 400 test
+problems with ``pointplan eval``. One JSON per cell goes to ``--out``; ``--plot`` draws the
+validation curves of all cells that are there.
+
+    python scripts/table1_representations.py --method bc                 # the five BC cells
+    python scripts/table1_representations.py --method rl --cells surface-normals:pointnet
+    python scripts/table1_representations.py --plot docs/img/table1_curves.png
+    python scripts/table1_representations.py --table
+
+Each cell writes ``OUT/CELL_METHOD.json``: the configuration, the validation curve, the
+selected checkpoint's test metrics and the wall time. Run folders go to ``--runs``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+CELLS = {
+    "image:cnn": ("image", "cnn"),
+    "interior:mlp": ("interior", "mlp"),
+    "interior:pointnet": ("interior", "pointnet"),
+    "surface:pointnet": ("surface", "pointnet"),
+    "surface-normals:pointnet": ("surface-normals", "pointnet"),
+}
+#: the paper's Table 1 (success %, BC and RL)
+PAPER = {
+    "image:cnn": (64.5, 44.5),
+    "interior:mlp": (42.0, 29.0),
+    "interior:pointnet": (76.0, 83.0),
+    "surface:pointnet": (85.0, 93.8),
+    "surface-normals:pointnet": (86.5, 99.5),
+}
+
+
+def net_config(encoder: str, width: int) -> object:
+    from pointplan.models.actor_critic import NetConfig
+    from pointplan.models.encoders import EncoderConfig
+
+    return NetConfig(EncoderConfig(encoder, width, 3), head_width=width, head_layers=3, critic_action="pooled", shared_encoder=True)
+
+
+def validate(actor: torch.nn.Module, robot: object, env: object, problems: list, horizon: int) -> float:
+    from pointplan.models.inputs import goal_input, obs_input
+    from pointplan.planners.policy import rollout_batch
+
+    def act(o: np.ndarray, q: np.ndarray, g: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            obs = torch.as_tensor(obs_input(robot, o), dtype=torch.float32)  # type: ignore[arg-type]
+            goal = torch.as_tensor(goal_input(robot, q, g), dtype=torch.float32)  # type: ignore[arg-type]
+            return actor.act(obs, goal).numpy()  # type: ignore[operator]
+
+    actor.eval()
+    res = rollout_batch(act, robot, env, problems, horizon, seed=0)  # type: ignore[arg-type]
+    actor.train()
+    return float(np.mean([r.success for r in res]))
+
+
+def test_eval(checkpoint: Path, episodes: int, json_path: Path) -> dict:
+    """The selected checkpoint on the test problems, once, through the CLI."""
+    cmd = ["pointplan", "eval", "--env", "narrow2d", "--planner", "policy", "--checkpoint", str(checkpoint)]
+    cmd += ["--episodes", str(episodes), "--seed", "0", "--json", str(json_path)]
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    data = json.loads(json_path.read_text())
+    return data[0] if isinstance(data, list) else data
+
+
+def run_bc(cell: str, args: argparse.Namespace) -> dict:
+    from pointplan.envs.core import EnvConfig
+    from pointplan.learning.bc import BCConfig, fit_actor, generate_demos, load_demos, observation_shape, policy_payload, save_demos
+    from pointplan.models.actor_critic import Actor
+    from pointplan.models.checkpoint import save_checkpoint, to_dict
+    from pointplan.scenes.scenarios import make_scenario
+
+    observation, encoder = CELLS[cell]
+    scenario = make_scenario("narrow2d")
+    robot = scenario.robot
+    demos_file = Path(args.runs) / f"demos_narrow2d_{args.bc_problems}.npz"
+    if demos_file.exists():
+        demos = load_demos(demos_file, scenario)
+    else:
+        demos = generate_demos(scenario, args.bc_problems, seed=0, workers=args.workers)
+        save_demos(demos_file, scenario, demos, "train", 0)
+    cfg = BCConfig(observation=observation, n_points=args.points, n_problems=args.bc_problems, epochs=args.bc_epochs, net=net_config(encoder, args.width))  # type: ignore[arg-type]
+    env = EnvConfig(observation=observation, n_points=args.points)
+    torch.manual_seed(0)
+    rng = np.random.default_rng(0)
+    shape = observation_shape(robot, env)
+    actor = Actor(shape, robot.twist_dim, robot.twist_dim, cfg.net)
+    opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr)
+    val = scenario.problems("val", args.val_episodes, seed=0)
+    run_dir = Path(args.runs) / f"{cell.replace(':', '_')}_bc"
+    run_dir.mkdir(parents=True, exist_ok=True)
+    curve, best, t0 = [], -1.0, time.perf_counter()
+    for done in range(args.bc_eval_every, args.bc_epochs + 1, args.bc_eval_every):
+        fit_actor(actor, opt, demos, robot, env, args.bc_eval_every, cfg.batch_size, rng, cfg.refresh_every, progress=False)
+        success = validate(actor, robot, env, val, scenario.horizon)
+        curve.append({"epochs": done, "val_success": success, "wall_time_s": time.perf_counter() - t0})
+        print(f"{cell} bc: {done} epochs, val {success:.3f}", file=sys.stderr)
+        payload = policy_payload(cfg, robot.name, shape, actor, scenario.horizon)
+        if success > best:
+            best = success
+            save_checkpoint(run_dir / "best.pt", {**payload, "bc_config": to_dict(cfg), "demo_steps": len(demos)})
+    test = test_eval(run_dir / "best.pt", args.test_episodes, run_dir / "test.json")
+    return {"demo_problems": len(demos.problems), "demo_steps": len(demos), "curve": curve, "best_val": best, "test": test}
+
+
+def run_rl(cell: str, args: argparse.Namespace) -> dict:
+    from pointplan.learning.sac import SACConfig
+    from pointplan.learning.train import TrainConfig, train
+
+    observation, encoder = CELLS[cell]
+    cfg = TrainConfig(
+        env="narrow2d",
+        observation=observation,
+        n_points=args.points,
+        total_steps=args.rl_steps,
+        updates_per_step=args.rl_updates_per_step,
+        eval_every=args.rl_eval_every,
+        eval_episodes=args.val_episodes,
+        net=net_config(encoder, args.width),  # type: ignore[arg-type]
+        sac=SACConfig(),
+    )
+    run_dir = Path(args.runs) / f"{cell.replace(':', '_')}_rl"
+    last = run_dir / "last.pt"
+    res = train(cfg, run_dir, progress=not args.quiet, resume=last if last.exists() else None)
+    curve = [{"env_steps": h["env_steps"], "val_success": h["val_success"], "wall_time_s": h["wall_time_s"]} for h in res.history]
+    old = Path(args.out) / f"{cell.replace(':', '_')}_rl.json"
+    if old.exists() and last.exists():  # a resumed run: keep the curve of its earlier part
+        before = [c for c in json.loads(old.read_text()).get("curve", []) if c["env_steps"] < (curve[0]["env_steps"] if curve else 1e18)]
+        curve = before + curve
+    if res.interrupted:
+        return {"curve": curve, "interrupted": True}
+    test = test_eval(run_dir / "best.pt", args.test_episodes, run_dir / "test.json")
+    return {"curve": curve, "best_val": res.best_success, "test": test}
+
+
+def plot(out_dir: Path, path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for ax, method, xkey, xlabel in ((axes[0], "bc", "epochs", "epochs of behavioural cloning"), (axes[1], "rl", "env_steps", "environment steps (SAC + HER)")):
+        for cell in CELLS:
+            f = out_dir / f"{cell.replace(':', '_')}_{method}.json"
+            if not f.exists():
+                continue
+            curve = json.loads(f.read_text())["curve"]
+            ax.plot([c[xkey] for c in curve], [100 * c["val_success"] for c in curve], marker="o", ms=3, label=cell.replace(":", " / "))
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("validation success (%)")
+        ax.set_ylim(0, 100)
+        ax.grid(alpha=0.3)
+        ax.set_title({"bc": "behavioural cloning", "rl": "reinforcement learning"}[method])
+        ax.legend(fontsize=8, loc="lower right")
+    fig.suptitle("2D-Narrow: obstacle representation x learning method (200 validation problems)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
+
+
+def table(out_dir: Path) -> None:
+    print("| representation | encoder | paper BC | ours BC | paper RL | ours RL |")
+    print("|---|---|---|---|---|---|")
+    for cell, (p_bc, p_rl) in PAPER.items():
+        obs, enc = CELLS[cell]
+        ours = []
+        for method in ("bc", "rl"):
+            f = out_dir / f"{cell.replace(':', '_')}_{method}.json"
+            test = json.loads(f.read_text()).get("test") if f.exists() else None
+            ours.append(f"{100 * test['success_rate']:.1f}%" if test else "-")
+        print(f"| {obs} | {enc} | {p_bc}% | {ours[0]} | {p_rl}% | {ours[1]} |")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--method", choices=["bc", "rl"])
+    ap.add_argument("--cells", nargs="*", default=list(CELLS), choices=list(CELLS))
+    ap.add_argument("--points", type=int, default=128, help="points per observation (the paper: 128)")
+    ap.add_argument("--width", type=int, default=64, help="layer width of encoders and heads")
+    ap.add_argument("--bc-problems", type=int, default=4000, help="Bi-RRT demonstration problems (shared by the BC cells)")
+    ap.add_argument("--bc-epochs", type=int, default=40)
+    ap.add_argument("--bc-eval-every", type=int, default=5, help="epochs between validations")
+    ap.add_argument("--rl-steps", type=int, default=300_000, help="environment steps per RL cell")
+    ap.add_argument("--rl-updates-per-step", type=float, default=0.25)
+    ap.add_argument("--rl-eval-every", type=int, default=20_000)
+    ap.add_argument("--val-episodes", type=int, default=200)
+    ap.add_argument("--test-episodes", type=int, default=400)
+    ap.add_argument("--workers", type=int, default=1, help="processes planning the demonstrations")
+    ap.add_argument("--out", default="docs/data/table1")
+    ap.add_argument("--runs", default="runs/table1")
+    ap.add_argument("--plot", help="draw the validation curves of the cells in --out to this file")
+    ap.add_argument("--table", action="store_true", help="print the Markdown table of the cells in --out")
+    ap.add_argument("--quiet", action="store_true")
+    args = ap.parse_args()
+    out = Path(args.out)
+    if args.method:
+        torch.set_num_threads(1)
+        out.mkdir(parents=True, exist_ok=True)
+        for cell in args.cells:
+            t0 = time.perf_counter()
+            result = run_bc(cell, args) if args.method == "bc" else run_rl(cell, args)
+            budget = (
+                {"demo_problems": args.bc_problems, "epochs": args.bc_epochs}
+                if args.method == "bc"
+                else {"env_steps": args.rl_steps, "updates_per_step": args.rl_updates_per_step}
+            )
+            record = {"cell": cell, "method": args.method, "points": args.points, "width": args.width, **budget, **result, "wall_time_s": time.perf_counter() - t0}
+            (out / f"{cell.replace(':', '_')}_{args.method}.json").write_text(json.dumps(record, indent=1))
+            test = result.get("test")
+            print(f"{cell} {args.method}: test success {test['success_rate']:.3f}" if test else f"{cell} {args.method}: interrupted", file=sys.stderr)
+    if args.plot:
+        plot(out, args.plot)
+    if args.table:
+        table(out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
