@@ -170,6 +170,15 @@ def test_training_smoke(tmp_path: object) -> None:
     assert set(res.test) == {"mpnet-nr", "mpnet-hr"} and res.test["mpnet-hr"]["episodes"] == 2
     planner = make_planner("mpnet-hr", ROBOT, checkpoint=str(run / "best.pt"))
     assert isinstance(planner, MPNetPlanner) and planner.net.layers[0][0].shape == (8 + 4, 16)
+    # validation demonstrations must come from the validation split
+    from dataclasses import replace
+
+    from pointplan.learning.bc import generate_demos, save_demos
+
+    train_file = run / "train_demos.npz"
+    save_demos(train_file, SCENARIO, generate_demos(SCENARIO, 2, progress=False), "train", 0)
+    with pytest.raises(ValueError, match="not val"):
+        train_mpnet(replace(cfg, demos_file=str(train_file), val_demos_file=str(train_file)), run / "again", progress=False)
 
 
 def test_cli_eval_runs_the_shipped_mpnet(tmp_path: object, capsys: pytest.CaptureFixture[str]) -> None:

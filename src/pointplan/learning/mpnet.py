@@ -204,10 +204,10 @@ def validation_loss(model: MPNetModel, ps: PathSet, center: np.ndarray, step: fl
 
 def _demos(scenario: Scenario, n: int, split: str, path: str | None, cfg: MPNetTrainConfig, progress: bool) -> Demos:
     if path and Path(path).exists():
-        demos = load_demos(path, scenario)
-        if len(demos.paths) < min(n, 1):
-            raise ValueError(f"{path}: no demonstrations")
-        return demos
+        with np.load(path, allow_pickle=False) as f:
+            if str(f["split"]) != split:
+                raise ValueError(f"{path}: demonstrations of the {f['split']} split, not {split}")
+        return load_demos(path, scenario)
     demos = generate_demos(scenario, n, cfg.seed, progress=progress, split=split, workers=cfg.workers)
     if path:
         save_demos(path, scenario, demos, split, cfg.seed)
