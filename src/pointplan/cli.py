@@ -109,12 +109,23 @@ def _scenario(args: argparse.Namespace) -> Any:
 
 #: planners that take --checkpoint
 POLICY_PLANNERS = ("policy", "hybrid")
+#: MPNet planners (their own checkpoints: `pointplan mpnet-train`)
+MPNET_PLANNERS = ("mpnet-nr", "mpnet-hr")
 
 
 def _check_checkpoint(args: argparse.Namespace, names: Sequence[str]) -> None:
-    """--checkpoint needs a planner that runs a policy."""
-    if getattr(args, "checkpoint", None) and not any(n in POLICY_PLANNERS for n in names):
-        raise CLIError(f"--checkpoint is for --planner policy or hybrid; {', '.join(names)} takes no checkpoint")
+    """--checkpoint needs a planner that runs a policy or an MPNet (not both kinds: one file
+    cannot be both)."""
+    if not getattr(args, "checkpoint", None):
+        return
+    policy = any(n in POLICY_PLANNERS for n in names)
+    mpnet = any(n in MPNET_PLANNERS for n in names)
+    if not (policy or mpnet):
+        raise CLIError(f"--checkpoint is for --planner policy, hybrid, mpnet-nr or mpnet-hr; {', '.join(names)} takes no checkpoint")
+    if policy and mpnet:
+        raise CLIError(
+            "--checkpoint: give either policy planners (policy, hybrid) or MPNet planners (mpnet-nr, mpnet-hr), not both: each takes its own checkpoint"
+        )
 
 
 def _policy_input(planner: Any) -> tuple[str, int] | None:
@@ -139,6 +150,10 @@ def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
         kwargs = {"checkpoint": getattr(args, "checkpoint", None), "observation": getattr(args, "observation", None)}
         if name == "hybrid":
             kwargs.update(max_nodes=args.max_nodes, seed=seed)
+    elif name in MPNET_PLANNERS:
+        kwargs = {"checkpoint": getattr(args, "checkpoint", None), "seed": seed}
+        if name == "mpnet-hr":
+            kwargs["max_nodes"] = args.max_nodes
     elif name.lower().startswith("ompl:"):
         kwargs = {"time_limit": getattr(args, "time_limit", None) or 1.0}
         if getattr(args, "range", None):
@@ -163,17 +178,17 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument(
         "--planner",
         default=planner_default,
-        help="birrt, straight, policy, hybrid (the policy, then Bi-RRT where it fails) or ompl:NAME for an OMPL planner such as ompl:RRTConnect (pip install 'pointplan[ompl]') (default: %(default)s)",
+        help="birrt, straight, policy, hybrid (the policy, then Bi-RRT where it fails), mpnet-nr, mpnet-hr (MPNet with neural or hybrid replanning) or ompl:NAME for an OMPL planner such as ompl:RRTConnect (pip install 'pointplan[ompl]') (default: %(default)s)",
     )
     p.add_argument(
         "--checkpoint",
-        help="trained policy (a best.pt or last.pt) for --planner policy or hybrid (default: the shipped policy for the robot and --observation); an error with other planners",
+        help="trained policy (a best.pt or last.pt) for --planner policy or hybrid, or trained MPNet for mpnet-nr and mpnet-hr (default: the shipped policy for the robot and --observation, or the shipped MPNet); an error with other planners",
     )
     p.add_argument(
         "--observation",
         help="what the robot observes (the policy's input; drawn by render and view): 2D surface, surface-normals, interior or image; 3D global or local (policy default: the one that ships for the robot)",
     )
-    p.add_argument("--max-nodes", type=positive_int, default=20000, help="Bi-RRT node budget (default: %(default)s)")
+    p.add_argument("--max-nodes", type=positive_int, default=20000, help="Bi-RRT node budget (hybrid and mpnet-hr: per Bi-RRT call) (default: %(default)s)")
     p.add_argument("--time-limit", type=float, help="seconds per problem for ompl:NAME planners (default: 1)")
     p.add_argument("--range", type=float, help="longest edge of ompl:NAME planners that have one (default: 0.07, Bi-RRT's step)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="problem-set seed, 0 or more (default: %(default)s)")
@@ -660,6 +675,55 @@ def cmd_collision_classify(args: argparse.Namespace) -> int:
     return 130 if interrupted else 0
 
 
+#: mpnet-train options derived from MPNetTrainConfig: flag -> field path
+MPNET_OPTIONS = {
+    "problems": "n_problems",
+    "demos": "demos_file",
+    "val-demo-problems": "val_demo_problems",
+    "val-demos": "val_demos_file",
+    "val-problems": "val_problems",
+    "test-problems": "test_problems",
+    "waypoint-step": "waypoint_step",
+    "subgoal-prob": "subgoal_prob",
+    "epochs": "epochs",
+    "lr": "lr",
+    "lr-end": "lr_end",
+    "paths-per-batch": "paths_per_batch",
+    "eval-every": "eval_every",
+    "max-nodes": "max_nodes",
+    "encoder-width": "net.encoder_width",
+    "encoder-layers": "net.encoder_layers",
+    "width": "net.width",
+    "layers": "net.layers",
+    "dropout": "net.dropout",
+    "workers": "workers",
+    "seed": "seed",
+}
+
+
+def cmd_mpnet_train(args: argparse.Namespace) -> int:
+    from .config import given_options, replace_paths
+    from .learning.mpnet import MPNetTrainConfig, train_mpnet
+    from .scenes.scenarios import is_3d
+
+    if is_3d(args.env):
+        raise CLIError("mpnet-train trains the 2D disc (--env narrow2d); MPNet in 3D is not implemented yet")
+    cfg = replace_paths(MPNetTrainConfig(env=args.env), given_options(args, MPNET_OPTIONS))
+    res = train_mpnet(cfg, args.run_dir, progress=not args.quiet)
+    v = res.best_val
+    print(
+        f"best validation success {v.get('val_success', float('nan')):.3f} at epoch {res.best_epoch} "
+        f"(demonstrations {res.demo_time_s:.0f} s, training {res.train_time_s:.0f} s); checkpoints in {res.run_dir}"
+    )
+    for name, m in res.test.items():
+        print(
+            f"test {name}: success {100 * m['success_rate']:.1f}%, nodes {m['nodes_mean']:.1f}, "
+            f"path length {m['path_length_mean']:.3f}, collision checks {m['collision_checks_mean']:.0f} ({m['episodes']} problems)"
+        )
+    _write_json(args.json, res.summary)
+    return 0
+
+
 def cmd_convert_checkpoint(args: argparse.Namespace) -> int:
     from .models.checkpoint import VERSION
     from .models.convert import convert_checkpoint
@@ -844,6 +908,23 @@ def _add_collision_parser(sub: Any) -> None:
     p.set_defaults(func=cmd_collision_classify)
 
 
+def _add_mpnet_parser(sub: Any) -> None:
+    from .config import add_config_options
+    from .learning.mpnet import MPNetTrainConfig
+
+    p = _subparser(
+        sub,
+        "mpnet-train",
+        "train MPNet (mpnet-nr, mpnet-hr) on Bi-RRT paths of training problems; model selection on validation problems, one test at the end (best.pt, last.pt, metrics.csv, summary.json in --run-dir)",
+    )
+    p.add_argument("--env", default="narrow2d", help="scenario to train on (default: %(default)s; the 2D disc only for now)")
+    add_config_options(p, MPNetTrainConfig(), MPNET_OPTIONS)
+    p.add_argument("--run-dir", default="runs/mpnet", help="where checkpoints and logs go (default: %(default)s)")
+    p.add_argument("--json", help="also write the summary to this JSON file")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=cmd_mpnet_train)
+
+
 def _add_convert_parser(sub: Any) -> None:
     p = _subparser(sub, "convert-checkpoint", "rewrite an older checkpoint holding pickled objects as a data-only one (unpickles OLD: trusted files only)")
     p.add_argument("old", help="the checkpoint to convert; it is fully unpickled, which can run code")
@@ -866,6 +947,7 @@ def build_parser() -> argparse.ArgumentParser:
         _add_bc_parser,
         _add_demo_parser,
         _add_collision_parser,
+        _add_mpnet_parser,
         _add_convert_parser,
     ):
         add(sub)

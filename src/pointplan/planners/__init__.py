@@ -1,5 +1,5 @@
 """Planners: Bi-RRT (RRT-Connect), the straight line, the learned policy, the hybrid
-(policy, then Bi-RRT), OMPL's planners (``ompl:NAME``, optional), and a registry to build
+(policy, then Bi-RRT), MPNet (``mpnet-nr``, ``mpnet-hr``), OMPL's planners (``ompl:NAME``, optional), and a registry to build
 them by name."""
 
 from __future__ import annotations
@@ -56,6 +56,28 @@ def _hybrid_factory(
 PLANNERS["hybrid"] = _hybrid_factory
 
 
+def _mpnet_factory(hybrid: bool) -> Callable[..., Planner]:
+    def make(robot: Robot, checkpoint: Any = None, **kw: Any) -> Planner:
+        """MPNet (``checkpoint``: a path or a loaded ``MPNet``; default: the one that ships
+        for ``robot``); keywords go to :class:`~pointplan.planners.mpnet.MPNetPlanner`
+        (``seed``, ``max_nodes`` of the hybrid's Bi-RRT, ``replan_iters``, ...)."""
+        from .mpnet import MPNetPlanner
+
+        if checkpoint is None or (isinstance(checkpoint, str) and checkpoint in ("", "shipped")):
+            from ..models.mpnet import shipped_mpnet
+
+            checkpoint = shipped_mpnet(robot.name)
+        return MPNetPlanner(checkpoint, robot=robot, hybrid=hybrid, **kw)
+
+    make.__name__ = f"_mpnet_{'hr' if hybrid else 'nr'}_factory"
+    return make
+
+
+#: MPNet with neural replanning, and with Bi-RRT where neural replanning fails
+PLANNERS["mpnet-nr"] = _mpnet_factory(False)
+PLANNERS["mpnet-hr"] = _mpnet_factory(True)
+
+
 def register_planner(name: str, factory: Callable[..., Planner]) -> None:
     """Make ``factory(robot, **kw)`` available to :func:`make_planner` as ``name``."""
     PLANNERS[name.lower()] = factory
@@ -63,7 +85,7 @@ def register_planner(name: str, factory: Callable[..., Planner]) -> None:
 
 def make_planner(name: str, robot: Robot, **kw: Any) -> Planner:
     """A planner by name (``birrt``, ``straight``, ``policy`` with ``checkpoint=``,
-    ``hybrid``, ``ompl:NAME`` for any OMPL geometric planner such as ``ompl:RRTConnect``,
+    ``hybrid``, ``mpnet-nr``, ``mpnet-hr`` (``checkpoint=`` or the shipped one), ``ompl:NAME`` for any OMPL geometric planner such as ``ompl:RRTConnect``,
     or any registered one). ``ompl:`` planners raise ``ImportError`` naming
     ``pip install 'pointplan[ompl]'`` when the optional ``ompl`` package is missing."""
     key = name.strip().lower()

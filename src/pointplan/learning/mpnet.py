@@ -1,0 +1,336 @@
+"""Training MPNet (Qureshi et al. 2019) on Bi-RRT paths of the training split.
+
+Data. Bi-RRT solutions (shortcut) of training problems, as behavioural cloning plans them
+(:func:`pointplan.learning.bc.generate_demos`, one problem per training workspace). Those
+come cut into policy steps; the shortcut path's own vertices are recovered (consecutive
+collinear pieces merged) and every segment is cut again into equal pieces no longer than
+``waypoint_step`` (0: the vertices alone, as in MPNet's paths). Each path is used in both
+directions. A sample is a waypoint ``w_i``, the next one ``w_{i+1}`` and a goal: the path's
+end, or with probability ``subgoal_prob`` a later waypoint drawn anew every epoch (the
+planner asks the network for the way to the end of the *other* chain, not only to the goal).
+
+Loss. Mean squared error between the network's displacement and ``(w_{i+1} - w_i) / step``
+(the next configuration in units of one step, 0.07), dropout on (as MPNet trains and plans);
+Adam, with the step size decaying along a cosine from ``lr`` to ``lr * lr_end``.
+A batch is ``paths_per_batch`` paths with all their samples, so the encoder runs once per
+workspace of the batch on the workspace's whole point set.
+
+Model selection. Every ``eval_every`` epochs the neural planner (``mpnet-nr``) plans
+``val_problems`` problems of the validation split, checked by the evaluator; the epoch with
+the best success (then the lowest validation loss, on Bi-RRT paths of validation problems)
+is kept as ``best.pt``. It is evaluated once, at the end, on ``test_problems`` test problems,
+as ``mpnet-nr`` and ``mpnet-hr``.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..evaluation import evaluate
+from ..models.checkpoint import save_checkpoint, to_dict
+from ..models.mpnet import MPNet, MPNetModel, MPNetNetConfig, encoder_input, mpnet_payload, scale_positions
+from ..planners.mpnet import MPNetPlanner, scene_points
+from ..robots.base import Robot
+from ..scenes.scenarios import Scenario, make_scenario
+from .bc import Demos, generate_demos, load_demos, save_demos
+
+
+@dataclass(frozen=True)
+class MPNetTrainConfig:
+    """An MPNet training run (saved with its checkpoints)."""
+
+    env: str = "narrow2d"
+    #: training problems planned by Bi-RRT (one per training workspace)
+    n_problems: int = field(default=4000, metadata={"min": 1})
+    #: a file of training demonstrations: loaded if it exists, written after planning otherwise
+    demos_file: str | None = None
+    #: validation problems planned by Bi-RRT for the validation loss
+    val_demo_problems: int = field(default=200, metadata={"min": 1})
+    #: a file of validation demonstrations (as demos_file)
+    val_demos_file: str | None = None
+    #: validation problems the neural planner plans for model selection
+    val_problems: int = field(default=200, metadata={"min": 1})
+    #: test problems the best model plans once at the end (mpnet-nr and mpnet-hr; 0: none)
+    test_problems: int = 400
+    #: longest waypoint spacing along the training paths (0: the shortcut paths' vertices only)
+    waypoint_step: float = 0.07
+    #: probability that a sample's goal is a later waypoint of its path instead of its end
+    subgoal_prob: float = 0.5
+    #: passes over the training paths
+    epochs: int = field(default=30, metadata={"min": 1})
+    #: Adam step size
+    lr: float = 1e-3
+    #: the step size decays along a cosine to this fraction of lr at the last epoch (1: constant)
+    lr_end: float = 0.05
+    #: paths per gradient step (all their samples, both directions)
+    paths_per_batch: int = field(default=16, metadata={"min": 1})
+    #: validate every this many epochs (and after the last)
+    eval_every: int = field(default=5, metadata={"min": 1})
+    #: Bi-RRT node budget of the hybrid planner in the final test
+    max_nodes: int = field(default=20000, metadata={"min": 1})
+    net: MPNetNetConfig = field(default_factory=MPNetNetConfig)
+    #: workers planning the demonstrations (Ray when installed, else processes)
+    workers: int = field(default=1, metadata={"min": 1})
+    seed: int = 0
+
+
+# ---------------------------------------------------------------------------- data
+def path_vertices(path: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """The vertices of a piecewise-straight path given with extra points along its segments:
+    repeated points dropped, then interior points where the path goes straight on."""
+    path = np.asarray(path, np.float64)
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(path, axis=0), axis=1) > tol])
+    path = path[keep]
+    if len(path) < 3:
+        return path
+    d = np.diff(path, axis=0)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    straight = np.einsum("ij,ij->i", d[:-1], d[1:]) > 1.0 - tol
+    return path[np.concatenate([[True], ~straight, [True]])]
+
+
+def cut_path(path: np.ndarray, step: float) -> np.ndarray:
+    """Every segment cut into equal pieces no longer than ``step`` (``step <= 0``: as is)."""
+    path = np.asarray(path, np.float64)
+    if step <= 0 or len(path) < 2:
+        return path
+    out = [path[:1]]
+    for a, b in zip(path[:-1], path[1:]):
+        k = max(1, int(np.ceil(np.linalg.norm(b - a) / step - 1e-9)))
+        out.append(a + (b - a) * (np.arange(1, k + 1) / k)[:, None])
+    return np.concatenate(out)
+
+
+@dataclass
+class PathSet:
+    """Directed waypoint paths (both directions of each demonstration) and their scenes'
+    encoder inputs, ready for batches."""
+
+    #: encoder inputs per demonstration ``(D, P, F)`` float32 (padded by duplicates)
+    points: torch.Tensor
+    #: waypoints of all directed paths, concatenated ``(W, dim)``
+    waypoints: np.ndarray
+    #: per directed path: first waypoint, number of waypoints, demonstration index
+    offset: np.ndarray
+    length: np.ndarray
+    demo: np.ndarray
+
+    @property
+    def n_demos(self) -> int:
+        return int(self.points.shape[0])
+
+
+def make_path_set(demos: Demos, robot: Robot, center: np.ndarray, step: float, waypoint_step: float) -> PathSet:
+    """The training (or validation) paths of ``demos``."""
+    ins: list[np.ndarray] = []
+    wps: list[np.ndarray] = []
+    offset, length, demo = [], [], []
+    at = 0
+    # demos.problems holds the problems in the order their indices first appear in demos.paths
+    unique = list(dict.fromkeys(index for index, _ in demos.paths))
+    problem_of = dict(zip(unique, demos.problems))
+    for d, (index, steps) in enumerate(demos.paths):
+        problem = problem_of[index]
+        pts, nrm = scene_points(robot, problem.scene)
+        ins.append(encoder_input(pts, nrm, center, step))
+        w = cut_path(path_vertices(steps), waypoint_step)
+        for seq in (w, w[::-1]):
+            wps.append(seq)
+            offset.append(at)
+            length.append(len(seq))
+            demo.append(d)
+            at += len(seq)
+    pmax = max(len(x) for x in ins)
+    padded = np.stack([np.concatenate([x, np.repeat(x[:1], pmax - len(x), 0)]) for x in ins]).astype(np.float32)
+    return PathSet(torch.as_tensor(padded), np.concatenate(wps), np.array(offset), np.array(length), np.array(demo))
+
+
+def batch_samples(ps: PathSet, demos_idx: np.ndarray, rng: np.random.Generator | None, subgoal_prob: float) -> tuple[np.ndarray, ...]:
+    """Samples of the directed paths of demonstrations ``demos_idx``: current, next, goal
+    waypoint indices and the batch-local scene index. ``rng is None``: every goal is the end."""
+    local = {int(d): k for k, d in enumerate(demos_idx)}
+    rows = np.flatnonzero(np.isin(ps.demo, demos_idx))
+    cur, goal, scene = [], [], []
+    for r in rows:
+        o, n = int(ps.offset[r]), int(ps.length[r])
+        i = np.arange(n - 1)
+        g = np.full(n - 1, n - 1)
+        if rng is not None and subgoal_prob > 0:
+            sub = rng.random(n - 1) < subgoal_prob
+            later = i + 1 + (rng.random(n - 1) * (n - 1 - i)).astype(np.int64)  # uniform in i+1 .. n-1
+            g = np.where(sub, later, g)
+        cur.append(o + i)
+        goal.append(o + g)
+        scene.append(np.full(n - 1, local[int(ps.demo[r])]))
+    c = np.concatenate(cur)
+    return c, c + 1, np.concatenate(goal), np.concatenate(scene)
+
+
+def batch_loss(
+    model: MPNetModel, ps: PathSet, demos_idx: np.ndarray, center: np.ndarray, step: float, rng: np.random.Generator | None, subgoal_prob: float
+) -> tuple[torch.Tensor, int]:
+    """Mean squared error (sum over coordinates) of the batch; and its number of samples."""
+    cur, nxt, goal, scene = batch_samples(ps, demos_idx, rng, subgoal_prob)
+    z = model.encode(ps.points[torch.as_tensor(demos_idx)])
+    q = ps.waypoints[cur]
+    target = torch.as_tensor(((ps.waypoints[nxt] - q) / step).astype(np.float32))
+    pred = model(
+        z[torch.as_tensor(scene)], torch.as_tensor(scale_positions(q, center, step)), torch.as_tensor(scale_positions(ps.waypoints[goal], center, step))
+    )
+    return ((pred - target) ** 2).sum(-1).mean(), len(cur)
+
+
+def validation_loss(model: MPNetModel, ps: PathSet, center: np.ndarray, step: float, per_batch: int = 64) -> float:
+    """Mean loss over every sample of ``ps`` (goal: each path's end; dropout off)."""
+    model.eval()
+    total, n = 0.0, 0
+    with torch.inference_mode():
+        for s in range(0, ps.n_demos, per_batch):
+            loss, k = batch_loss(model, ps, np.arange(s, min(s + per_batch, ps.n_demos)), center, step, None, 0.0)
+            total += float(loss) * k
+            n += k
+    model.train()
+    return total / max(n, 1)
+
+
+def _demos(scenario: Scenario, n: int, split: str, path: str | None, cfg: MPNetTrainConfig, progress: bool) -> Demos:
+    if path and Path(path).exists():
+        with np.load(path, allow_pickle=False) as f:
+            if str(f["split"]) != split:
+                raise ValueError(f"{path}: demonstrations of the {f['split']} split, not {split}")
+        return load_demos(path, scenario)
+    demos = generate_demos(scenario, n, cfg.seed, progress=progress, split=split, workers=cfg.workers)
+    if path:
+        save_demos(path, scenario, demos, split, cfg.seed)
+    return demos
+
+
+@dataclass
+class MPNetTrainResult:
+    """What :func:`train_mpnet` returns."""
+
+    run_dir: Path
+    best_epoch: int
+    best_val: dict[str, float]
+    history: list[dict[str, float]]
+    test: dict[str, dict[str, Any]]
+    demo_time_s: float
+    train_time_s: float
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = True) -> MPNetTrainResult:
+    """Train on the training split, select on the validation split, test once. Writes
+    ``best.pt``, ``last.pt``, ``metrics.csv`` and ``summary.json`` to ``run_dir``."""
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0x3B9E7]))
+    scenario = make_scenario(cfg.env)
+    robot = scenario.robot
+    low, high = scenario.bounds
+    center = (np.asarray(low) + np.asarray(high)) / 2
+    step = float(robot.action_scale[0])
+
+    t0 = time.perf_counter()
+    train_demos = _demos(scenario, cfg.n_problems, "train", cfg.demos_file, cfg, progress)
+    val_demos = _demos(scenario, cfg.val_demo_problems, "val", cfg.val_demos_file, cfg, progress)
+    train_set = make_path_set(train_demos, robot, center, step, cfg.waypoint_step)
+    val_set = make_path_set(val_demos, robot, center, step, cfg.waypoint_step)
+    val_problems = scenario.problems("val", cfg.val_problems, seed=cfg.seed)
+    demo_time = time.perf_counter() - t0
+
+    model = MPNetModel(robot.dim, 2 * robot.dim, cfg.net)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda e: cfg.lr_end + (1.0 - cfg.lr_end) * 0.5 * (1.0 + np.cos(np.pi * min(e / max(cfg.epochs - 1, 1), 1.0)))
+    )
+    extra = {"train_config": to_dict(cfg), "demo_problems": len(train_demos.paths), "waypoints": int(len(train_set.waypoints))}
+
+    def snapshot(m: MPNetModel) -> MPNet:
+        return MPNet(copy.deepcopy(m).eval(), robot, center, step, {})
+
+    history: list[dict[str, float]] = []
+    best: tuple[float, float] | None = None
+    best_epoch, best_val = 0, {}
+    t1 = time.perf_counter()
+    epochs: Any = range(1, cfg.epochs + 1)
+    if progress:
+        from tqdm import tqdm
+
+        epochs = tqdm(epochs, desc="mpnet", unit="epoch")
+    model.train()
+    for ep in epochs:
+        order = rng.permutation(train_set.n_demos)
+        total, n = 0.0, 0
+        for s in range(0, len(order), cfg.paths_per_batch):
+            loss, k = batch_loss(model, train_set, order[s : s + cfg.paths_per_batch], center, step, rng, cfg.subgoal_prob)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            total += float(loss.detach()) * k
+            n += k
+        row: dict[str, float] = {"epoch": ep, "lr": float(opt.param_groups[0]["lr"]), "train_loss": total / max(n, 1), "time_s": time.perf_counter() - t1}
+        sched.step()
+        if ep % cfg.eval_every == 0 or ep == cfg.epochs:
+            row["val_loss"] = validation_loss(model, val_set, center, step)
+            planner = MPNetPlanner(snapshot(model), robot, seed=cfg.seed)
+            m = evaluate(planner, val_problems, robot, progress=False).metrics()
+            row.update(val_success=m["success_rate"], val_nodes=m["nodes_mean"], val_checks=m["collision_checks_mean"], val_path_length=m["path_length_mean"])
+            key = (row["val_success"], -row["val_loss"])
+            payload = mpnet_payload(model, scenario.name, robot, center, step, epoch=ep, val={k: float(v) for k, v in row.items()}, **extra)
+            if best is None or key > best:
+                best, best_epoch, best_val = key, ep, dict(row)
+                save_checkpoint(run_dir / "best.pt", payload)
+            save_checkpoint(run_dir / "last.pt", payload)
+        history.append(row)
+        _write_csv(run_dir / "metrics.csv", history)
+        if progress:
+            post = {"loss": f"{row['train_loss']:.3f}"}
+            if "val_success" in row:
+                post.update(val=f"{row['val_success']:.3f}", best=f"{best_val.get('val_success', 0):.3f}@{best_epoch}")
+            epochs.set_postfix(post)
+    train_time = time.perf_counter() - t1
+
+    test: dict[str, dict[str, Any]] = {}
+    if cfg.test_problems > 0:
+        best_net = MPNet.from_checkpoint(run_dir / "best.pt")
+        problems = scenario.problems("test", cfg.test_problems, seed=cfg.seed)
+        for hybrid in (False, True):
+            planner = MPNetPlanner(best_net, robot, hybrid=hybrid, seed=cfg.seed, max_nodes=cfg.max_nodes)
+            test[planner.name] = evaluate(planner, problems, robot, progress=progress).metrics()
+    summary = {
+        "config": to_dict(cfg),
+        "run_dir": str(run_dir),
+        "best_epoch": best_epoch,
+        "best_val": best_val,
+        "demo_problems": len(train_demos.paths),
+        "training_samples_per_epoch": int(len(train_set.waypoints) - len(train_set.offset)),
+        "demo_time_s": demo_time,
+        "train_time_s": train_time,
+        "test": test,
+    }
+    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return MPNetTrainResult(run_dir, best_epoch, best_val, history, test, demo_time, train_time, summary)
+
+
+def _write_csv(path: Path, rows: list[dict[str, float]]) -> None:
+    keys: list[str] = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows)
+
+
+__all__ = ["MPNetTrainConfig", "MPNetTrainResult", "cut_path", "path_vertices", "train_mpnet"]
