@@ -193,7 +193,7 @@ def main() -> int:
     ap.add_argument("--points", type=int, default=128, help="points per observation (the paper: 128)")
     ap.add_argument("--width", type=int, default=64, help="layer width of encoders and heads")
     ap.add_argument("--bc-problems", type=int, default=4000, help="Bi-RRT demonstration problems (shared by the BC cells)")
-    ap.add_argument("--bc-epochs", type=int, default=40)
+    ap.add_argument("--bc-epochs", type=int, default=30)
     ap.add_argument("--bc-eval-every", type=int, default=5, help="epochs between validations")
     ap.add_argument("--rl-steps", type=int, default=300_000, help="environment steps per RL cell")
     ap.add_argument("--rl-updates-per-step", type=float, default=0.25)
@@ -205,6 +205,7 @@ def main() -> int:
     ap.add_argument("--runs", default="runs/table1")
     ap.add_argument("--plot", help="draw the validation curves of the cells in --out to this file")
     ap.add_argument("--table", action="store_true", help="print the Markdown table of the cells in --out")
+    ap.add_argument("--redo", action="store_true", help="run cells whose result is in --out already")
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args()
     out = Path(args.out)
@@ -212,6 +213,10 @@ def main() -> int:
         torch.set_num_threads(1)
         out.mkdir(parents=True, exist_ok=True)
         for cell in args.cells:
+            done = out / f"{cell.replace(':', '_')}_{args.method}.json"
+            if not args.redo and done.exists() and "test" in json.loads(done.read_text()):
+                print(f"{cell} {args.method}: done already ({done}; --redo to run it again)", file=sys.stderr)
+                continue
             t0 = time.perf_counter()
             result = run_bc(cell, args) if args.method == "bc" else run_rl(cell, args)
             budget = (
@@ -219,7 +224,15 @@ def main() -> int:
                 if args.method == "bc"
                 else {"env_steps": args.rl_steps, "updates_per_step": args.rl_updates_per_step}
             )
-            record = {"cell": cell, "method": args.method, "points": args.points, "width": args.width, **budget, **result, "wall_time_s": time.perf_counter() - t0}
+            record = {
+                "cell": cell,
+                "method": args.method,
+                "points": args.points,
+                "width": args.width,
+                **budget,
+                **result,
+                "wall_time_s": time.perf_counter() - t0,
+            }
             (out / f"{cell.replace(':', '_')}_{args.method}.json").write_text(json.dumps(record, indent=1))
             test = result.get("test")
             print(f"{cell} {args.method}: test success {test['success_rate']:.3f}" if test else f"{cell} {args.method}: interrupted", file=sys.stderr)

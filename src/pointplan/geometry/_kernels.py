@@ -150,3 +150,33 @@ def ray_box_compiled(o, d, c, rot, h):  # type: ignore[no-untyped-def]
         axis,
     )
     return t0, t1, axis
+
+
+def _winding_numbers(points, tri, out):  # type: ignore[no-untyped-def]
+    """Generalised winding number of the triangles ``tri (F, 3, 3)`` at ``points (N, 3)``:
+    the sum of their solid angles (Van Oosterom & Strackee) over 4 pi; writes ``out (N,)``.
+    ``collision.mesh_winding_reference`` computes the same with numpy."""
+    for n in range(points.shape[0]):
+        px, py, pz = points[n, 0], points[n, 1], points[n, 2]
+        total = 0.0
+        for f in range(tri.shape[0]):
+            ax, ay, az = tri[f, 0, 0] - px, tri[f, 0, 1] - py, tri[f, 0, 2] - pz
+            bx, by, bz = tri[f, 1, 0] - px, tri[f, 1, 1] - py, tri[f, 1, 2] - pz
+            cx, cy, cz = tri[f, 2, 0] - px, tri[f, 2, 1] - py, tri[f, 2, 2] - pz
+            la = np.sqrt(ax * ax + ay * ay + az * az)
+            lb = np.sqrt(bx * bx + by * by + bz * bz)
+            lc = np.sqrt(cx * cx + cy * cy + cz * cz)
+            num = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)
+            den = la * lb * lc + (ax * bx + ay * by + az * bz) * lc + (ax * cx + ay * cy + az * cz) * lb + (bx * cx + by * cy + bz * cz) * la
+            total += np.arctan2(num, den)
+        out[n] = total / (2.0 * np.pi)
+
+
+_winding_numbers = numba.njit(cache=True, nogil=True)(_winding_numbers)
+
+
+def winding_numbers_compiled(points, tri):  # type: ignore[no-untyped-def]
+    """Winding numbers ``(N,)`` of the closed triangle soup ``tri (F, 3, 3)`` at ``points (N, 3)``."""
+    out = np.empty(len(points))
+    _winding_numbers(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(tri, dtype=np.float64), out)
+    return out
