@@ -275,7 +275,7 @@ def test_a_start_or_goal_in_collision_is_reported(tmp_path: Path, capsys: pytest
 
 def test_checkpoint_with_a_planner_that_takes_none_is_an_error(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["eval", "--planner", "birrt", "--checkpoint", "x.pt", "--episodes", "1", "--quiet"]) == 2
-    assert "--checkpoint is for --planner policy, hybrid, mpnet-nr or mpnet-hr" in capsys.readouterr().err
+    assert "--checkpoint is for --planner policy, hybrid, mpnet-nr, mpnet-hr or a learned-sampling planner" in capsys.readouterr().err
 
 
 def test_eval_json_names_the_planner(tmp_path: Path) -> None:

@@ -111,21 +111,31 @@ def _scenario(args: argparse.Namespace) -> Any:
 POLICY_PLANNERS = ("policy", "hybrid")
 #: MPNet planners (their own checkpoints: `pointplan mpnet-train`)
 MPNET_PLANNERS = ("mpnet-nr", "mpnet-hr")
+#: learned-sampling planners: Bi-RRT with a CVAE's samples (their own checkpoints: `pointplan lsample-train`)
+LSAMPLE_PLANNERS = ("learned-sampling", "lsample-0.5", "lsample-0.9")
 
 
 def _check_checkpoint(args: argparse.Namespace, names: Sequence[str]) -> None:
-    """--checkpoint needs a planner that runs a policy or an MPNet (not both kinds: one file
-    cannot be both)."""
+    """--checkpoint needs a planner that runs a policy, an MPNet or a learned sampler (one
+    kind only: one file cannot be two)."""
     if not getattr(args, "checkpoint", None):
         return
-    policy = any(n in POLICY_PLANNERS for n in names)
-    mpnet = any(n in MPNET_PLANNERS for n in names)
-    if not (policy or mpnet):
-        raise CLIError(f"--checkpoint is for --planner policy, hybrid, mpnet-nr or mpnet-hr; {', '.join(names)} takes no checkpoint")
-    if policy and mpnet:
-        raise CLIError(
-            "--checkpoint: give either policy planners (policy, hybrid) or MPNet planners (mpnet-nr, mpnet-hr), not both: each takes its own checkpoint"
+    kinds = [
+        kind
+        for kind, members in (
+            ("policy planners (policy, hybrid)", POLICY_PLANNERS),
+            ("MPNet planners (mpnet-nr, mpnet-hr)", MPNET_PLANNERS),
+            ("learned-sampling planners (lsample-0.5, lsample-0.9, learned-sampling)", LSAMPLE_PLANNERS),
         )
+        if any(n.lower() in members for n in names)
+    ]
+    if not kinds:
+        raise CLIError(
+            f"--checkpoint is for --planner policy, hybrid, mpnet-nr, mpnet-hr or a learned-sampling planner (lsample-0.5, lsample-0.9, learned-sampling); {', '.join(names)} takes no checkpoint"
+        )
+    if len(kinds) > 1:
+        which = "both" if len(kinds) == 2 else "all three"
+        raise CLIError(f"--checkpoint: give either {' or '.join(kinds)}, not {which}: each takes its own checkpoint")
 
 
 def _policy_input(planner: Any) -> tuple[str, int] | None:
@@ -146,6 +156,8 @@ def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
     kwargs: dict[str, Any] = {}
     if name == "birrt":
         kwargs = {"max_nodes": args.max_nodes, "seed": seed}
+    elif name.lower() in LSAMPLE_PLANNERS:
+        kwargs = {"max_nodes": args.max_nodes, "seed": seed, "checkpoint": getattr(args, "checkpoint", None)}
     elif name in ("policy", "hybrid"):
         kwargs = {"checkpoint": getattr(args, "checkpoint", None), "observation": getattr(args, "observation", None)}
         if name == "hybrid":
@@ -178,17 +190,22 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument(
         "--planner",
         default=planner_default,
-        help="birrt, straight, policy, hybrid (the policy, then Bi-RRT where it fails), mpnet-nr, mpnet-hr (MPNet with neural or hybrid replanning) or ompl:NAME for an OMPL planner such as ompl:RRTConnect (pip install 'pointplan[ompl]') (default: %(default)s)",
+        help="birrt, straight, policy, hybrid (the policy, then Bi-RRT where it fails), mpnet-nr, mpnet-hr (MPNet with neural or hybrid replanning), lsample-0.5 or lsample-0.9 (Bi-RRT drawing that fraction of its samples from a learned CVAE; learned-sampling is lsample-0.5) or ompl:NAME for an OMPL planner such as ompl:RRTConnect (pip install 'pointplan[ompl]') (default: %(default)s)",
     )
     p.add_argument(
         "--checkpoint",
-        help="trained policy (a best.pt or last.pt) for --planner policy or hybrid, or trained MPNet for mpnet-nr and mpnet-hr (default: the shipped policy for the robot and --observation, or the shipped MPNet); an error with other planners",
+        help="trained policy (a best.pt or last.pt) for --planner policy or hybrid, trained MPNet for mpnet-nr and mpnet-hr, or a sampler network from `pointplan lsample-train` for the lsample planners (default: the shipped policy for the robot and --observation, the shipped MPNet or the shipped sampler); an error with other planners",
     )
     p.add_argument(
         "--observation",
         help="what the robot observes (the policy's input; drawn by render and view): 2D surface, surface-normals, interior or image; 3D global or local (policy default: the one that ships for the robot)",
     )
-    p.add_argument("--max-nodes", type=positive_int, default=20000, help="Bi-RRT node budget (hybrid and mpnet-hr: per Bi-RRT call) (default: %(default)s)")
+    p.add_argument(
+        "--max-nodes",
+        type=positive_int,
+        default=20000,
+        help="Bi-RRT node budget (hybrid and mpnet-hr: per Bi-RRT call; also the lsample planners') (default: %(default)s)",
+    )
     p.add_argument("--time-limit", type=float, help="seconds per problem for ompl:NAME planners (default: 1)")
     p.add_argument("--range", type=float, help="longest edge of ompl:NAME planners that have one (default: 0.07, Bi-RRT's step)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="problem-set seed, 0 or more (default: %(default)s)")
@@ -724,6 +741,49 @@ def cmd_mpnet_train(args: argparse.Namespace) -> int:
     return 0
 
 
+#: lsample-train options derived from LSampleConfig: flag -> field path
+LSAMPLE_OPTIONS = {
+    "env": "env",
+    "problems": "n_problems",
+    "val-problems": "val_problems",
+    "plan-problems": "plan_problems",
+    "epochs": "epochs",
+    "eval-every": "eval_every",
+    "lr": "lr",
+    "batch-problems": "batch_problems",
+    "per-problem": "per_problem",
+    "kl-weight": "kl_weight",
+    "path-spacing": "path_spacing",
+    "latent": "net.latent",
+    "width": "net.width",
+    "layers": "net.layers",
+    "point-width": "net.point_width",
+    "point-layers": "net.point_layers",
+    "seed": "seed",
+    "max-nodes": "max_nodes",
+    "workers": "workers",
+    "demos": "demos",
+    "val-demos": "val_demos",
+}
+
+
+def cmd_lsample_train(args: argparse.Namespace) -> int:
+    from .config import given_options, replace_paths
+    from .learning.lsample import LSampleConfig, train_lsample
+
+    cfg = replace_paths(LSampleConfig(), given_options(args, LSAMPLE_OPTIONS))
+    summary = train_lsample(cfg, args.run_dir, progress=not args.quiet)
+    best = summary["best_val_nodes_0.9"]
+    print(
+        f"trained on {summary['train_configs']} configurations of {summary['train_problems']} Bi-RRT solutions, {summary['epochs']} epochs, "
+        f"{summary['train_time_s']:.0f} s (data {summary['data_time_s']:.0f} s); best epoch {summary['best_epoch']}"
+        + (f" ({best:.1f} mean nodes at lambda 0.9 on validation problems)" if best is not None else "")
+        + f"; checkpoints in {summary['run_dir']}"
+    )
+    _write_json(args.json, summary)
+    return 130 if summary["interrupted"] else 0
+
+
 def cmd_convert_checkpoint(args: argparse.Namespace) -> int:
     from .models.checkpoint import VERSION
     from .models.convert import convert_checkpoint
@@ -925,6 +985,22 @@ def _add_mpnet_parser(sub: Any) -> None:
     p.set_defaults(func=cmd_mpnet_train)
 
 
+def _add_lsample_parser(sub: Any) -> None:
+    from .config import add_config_options
+    from .learning.lsample import LSampleConfig
+
+    p = _subparser(
+        sub,
+        "lsample-train",
+        "train the learned sampler of --planner lsample-0.5 / lsample-0.9 (Ichter et al. 2018): a conditional VAE on configurations of Bi-RRT solutions of training problems",
+    )
+    add_config_options(p, LSampleConfig(), LSAMPLE_OPTIONS)
+    p.add_argument("--run-dir", default="runs/lsample", help="where best.pt, last.pt and metrics.csv go (default: %(default)s)")
+    p.add_argument("--json", help="also write the summary to this JSON file")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=cmd_lsample_train)
+
+
 def _add_convert_parser(sub: Any) -> None:
     p = _subparser(sub, "convert-checkpoint", "rewrite an older checkpoint holding pickled objects as a data-only one (unpickles OLD: trusted files only)")
     p.add_argument("old", help="the checkpoint to convert; it is fully unpickled, which can run code")
@@ -948,6 +1024,7 @@ def build_parser() -> argparse.ArgumentParser:
         _add_demo_parser,
         _add_collision_parser,
         _add_mpnet_parser,
+        _add_lsample_parser,
         _add_convert_parser,
     ):
         add(sub)

@@ -1,6 +1,7 @@
 """Planners: Bi-RRT (RRT-Connect), the straight line, the learned policy, the hybrid
-(policy, then Bi-RRT), MPNet (``mpnet-nr``, ``mpnet-hr``), OMPL's planners (``ompl:NAME``, optional), and a registry to build
-them by name."""
+(policy, then Bi-RRT), MPNet (``mpnet-nr``, ``mpnet-hr``), learned sampling (Bi-RRT with a
+CVAE's samples: ``learned-sampling``, ``lsample-0.5``, ``lsample-0.9``), OMPL's planners
+(``ompl:NAME``, optional), and a registry to build them by name."""
 
 from __future__ import annotations
 
@@ -78,6 +79,28 @@ PLANNERS["mpnet-nr"] = _mpnet_factory(False)
 PLANNERS["mpnet-hr"] = _mpnet_factory(True)
 
 
+def _learned_sampling_factory(robot: Robot, lam: float = 0.5, checkpoint: str | None = None, **kw: Any) -> Planner:
+    """Learned sampling (Ichter et al. 2018): Bi-RRT drawing a fraction ``lam`` of its
+    targets from a CVAE (``checkpoint`` or the one shipped for ``robot``); other keywords
+    are Bi-RRT's (``max_nodes``, ``seed``, ...)."""
+    from .learned_sampling import learned_sampling_factory
+
+    return learned_sampling_factory(robot, lam=lam, checkpoint=checkpoint, **kw)
+
+
+def _lsample(lam: float) -> Callable[..., Planner]:
+    def factory(robot: Robot, **kw: Any) -> Planner:
+        return _learned_sampling_factory(robot, lam=lam, **kw)
+
+    factory.__doc__ = f"Learned sampling with lam = {lam} (see ``learned-sampling``)."
+    return factory
+
+
+PLANNERS["learned-sampling"] = _learned_sampling_factory
+PLANNERS["lsample-0.5"] = _lsample(0.5)
+PLANNERS["lsample-0.9"] = _lsample(0.9)
+
+
 def register_planner(name: str, factory: Callable[..., Planner]) -> None:
     """Make ``factory(robot, **kw)`` available to :func:`make_planner` as ``name``."""
     PLANNERS[name.lower()] = factory
@@ -85,7 +108,8 @@ def register_planner(name: str, factory: Callable[..., Planner]) -> None:
 
 def make_planner(name: str, robot: Robot, **kw: Any) -> Planner:
     """A planner by name (``birrt``, ``straight``, ``policy`` with ``checkpoint=``,
-    ``hybrid``, ``mpnet-nr``, ``mpnet-hr`` (``checkpoint=`` or the shipped one), ``ompl:NAME`` for any OMPL geometric planner such as ``ompl:RRTConnect``,
+    ``hybrid``, ``mpnet-nr``, ``mpnet-hr`` (``checkpoint=`` or the shipped one), ``learned-sampling`` with ``lam=``
+    (or ``lsample-0.5``, ``lsample-0.9``; ``checkpoint=`` or the shipped one), ``ompl:NAME`` for any OMPL geometric planner such as ``ompl:RRTConnect``,
     or any registered one). ``ompl:`` planners raise ``ImportError`` naming
     ``pip install 'pointplan[ompl]'`` when the optional ``ompl`` package is missing."""
     key = name.strip().lower()

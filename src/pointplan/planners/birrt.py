@@ -11,11 +11,17 @@ checks all its steps in one validator call. The solution is then shortcut: two p
 arc length along the path are joined by a geodesic when that is free and shorter.
 
 Only the :class:`~pointplan.robots.base.Robot` API is used, so any robot works.
+
+The extend targets are uniform in the bounds unless a ``sampler`` is given: called once per
+problem (``sampler(problem)``, inside the timed query), it returns ``draw(rng, n)`` giving
+``n`` targets from the query's own generator (the learned sampler of
+:mod:`pointplan.planners.learned_sampling` mixes a network's samples with uniform ones).
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,6 +32,11 @@ from ..scenes.scene import Problem
 from .base import Array, PlanResult, check_free, march
 
 _SAMPLE_BLOCK = 256
+
+#: ``draw(rng, n) -> (n, config_dim)``: targets for the extend steps
+DrawSamples = Callable[[np.random.Generator, int], Array]
+#: ``sampler(problem) -> draw``, called once per query (it may prepare per-problem state)
+SamplerFactory = Callable[[Problem], DrawSamples]
 
 
 #: trees smaller than this find nearest nodes by a scan; larger ones index older nodes
@@ -120,6 +131,10 @@ class BiRRT:
     the other tree's root instead of a uniform sample (0 is plain RRT-Connect). Each
     ``plan`` call draws from ``default_rng((seed, call number))``: a fresh planner gives
     the same results on the same sequence of problems.
+
+    ``sampler`` (optional) replaces the uniform targets: ``sampler(problem)`` returns
+    ``draw(rng, n)``, called for blocks of targets with the query's generator in place of
+    ``robot.sample_uniform(rng, n, low, high)``. Without it the planner is unchanged.
     """
 
     name = "birrt"
@@ -133,6 +148,7 @@ class BiRRT:
         shortcut_iters: int = 100,
         goal_bias: float = 0.0,
         seed: int = 0,
+        sampler: SamplerFactory | None = None,
     ) -> None:
         if step <= 0 or resolution <= 0:
             raise ValueError("step and resolution must be positive")
@@ -145,6 +161,7 @@ class BiRRT:
         self.shortcut_iters = int(shortcut_iters)
         self.goal_bias = float(goal_bias)
         self.seed = int(seed)
+        self.sampler = sampler
         self.calls = 0
 
     def __repr__(self) -> str:
@@ -175,6 +192,7 @@ class BiRRT:
         if not ends_free.all():
             return PlanResult.failure(cdim, 2, checks, time.perf_counter() - t0, trees=[t.export() for t in trees])
 
+        draw = self.sampler(problem) if self.sampler is not None else None
         samples = np.empty((0, cdim))
         coins = np.empty(0)
         k = 0
@@ -182,7 +200,7 @@ class BiRRT:
         raw: Array | None = None
         while trees[0].n + trees[1].n < self.max_nodes:
             if k == len(samples):
-                samples = robot.sample_uniform(rng, _SAMPLE_BLOCK, low, high)
+                samples = robot.sample_uniform(rng, _SAMPLE_BLOCK, low, high) if draw is None else draw(rng, _SAMPLE_BLOCK)
                 coins = rng.random(_SAMPLE_BLOCK)
                 k = 0
             ta, tb = trees[a], trees[1 - a]
@@ -266,4 +284,4 @@ class BiRRT:
         return path, checks
 
 
-__all__ = ["BiRRT"]
+__all__ = ["BiRRT", "DrawSamples", "SamplerFactory"]
