@@ -36,6 +36,7 @@ from .bc import Demos, generate_demos, load_demos, save_demos
 class LSampleConfig:
     """A learned-sampler training run (saved with its checkpoint)."""
 
+    #: scenario (2D-Narrow; the problem's frame is defined in 2D only)
     env: str = "narrow2d"
     #: training problems solved by Bi-RRT for the data
     n_problems: int = field(default=4000, metadata={"min": 1})
@@ -44,20 +45,21 @@ class LSampleConfig:
     #: validation problems planned with the sampler (lambda 0.5 and 0.9) to select the epoch; 0: none
     plan_problems: int = 200
     #: passes over the training problems
-    epochs: int = field(default=60, metadata={"min": 1})
+    epochs: int = field(default=80, metadata={"min": 1})
     #: epochs between two planning evaluations on validation problems
-    eval_every: int = field(default=10, metadata={"min": 1})
+    eval_every: int = field(default=20, metadata={"min": 1})
     #: Adam step size
     lr: float = 1e-3
     #: problems per gradient step
-    batch_problems: int = field(default=64, metadata={"min": 1})
+    batch_problems: int = field(default=32, metadata={"min": 1})
     #: configurations drawn along each problem's solution per gradient step
-    per_problem: int = field(default=8, metadata={"min": 1})
-    #: weight of the KL term (positions in [-1, 1]; Ichter et al. use 1e-4 in theirs)
-    kl_weight: float = 1e-3
+    per_problem: int = field(default=16, metadata={"min": 1})
+    #: weight of the KL term (in the units of the CVAE's coordinates: half-distances between start and goal in the problem's frame)
+    kl_weight: float = 3e-3
     #: solutions are resampled this far apart (arc length) before configurations are drawn
     path_spacing: float = 0.005
     net: CVAEConfig = field(default_factory=CVAEConfig)
+    #: seeds the training problems' draw, the network, the batches and the validation planner
     seed: int = 0
     #: Bi-RRT's node budget for the data
     max_nodes: int = 20000

@@ -4,7 +4,8 @@ Harrison and Pavone, "Learning Sampling Distributions for Robot Motion Planning"
 The model learns ``p(x | c)``: configurations ``x`` that lie on solutions of the problem
 ``c``. The condition ``c`` is ``[PointNet(obstacle points with normals), start, goal]``;
 the points are the scene's boundary points (on the 0.015 grid of the ``surface-normals``
-observer) in the *world* frame, since the samples are world-frame configurations. Positions
+observer), all of them, expressed like the configurations in the problem's start-goal
+frame (``frame="start-goal"``, the default; see :class:`LearnedSamplerNet`). Positions
 (configurations, start, goal, points) are mapped to ``[-1, 1]`` by the workspace bounds,
 and scaled by ``input_scale`` where they enter a network (the decoder's output stays in
 ``[-1, 1]``).
@@ -13,7 +14,7 @@ and scaled by ``input_scale`` where they enter a network (the decoder's output s
 - decoder ``p(x | z, c)``: an MLP giving the configuration (its mean; samples are decoder
   means of latents drawn from the prior ``N(0, I)``, as Ichter et al. do);
 - loss: squared error of the reconstruction (summed over coordinates) plus ``kl_weight``
-  times the KL divergence to the prior (Ichter et al. weight it 1e-4 in their units).
+  times the KL divergence to the prior.
 
 Only translation configurations (disc, sphere) are supported: the decoder's output is a
 position.
@@ -42,7 +43,7 @@ class CVAEConfig:
     """Shape of the learned sampler's network."""
 
     #: size of the latent ``z``
-    latent: int = 3
+    latent: int = 2
     #: hidden width of the recognition and decoder MLPs
     width: int = 128
     #: hidden layers of the recognition and decoder MLPs
