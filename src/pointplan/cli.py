@@ -562,6 +562,7 @@ BC_OPTIONS = {
     "lr": "bc.lr",
     "batch-size": "bc.batch_size",
     "refresh-every": "bc.refresh_every",
+    "spread-weight": "bc.spread_weight",
     "workers": "bc.workers",
     "demos": "bc.demos_file",
     "rollouts": "rollouts",

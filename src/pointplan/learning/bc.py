@@ -241,6 +241,10 @@ class BCConfig:
     device: str = "cpu"
     #: draw new observation subsets every this many epochs (0: never)
     refresh_every: int = 5
+    #: weight of a Gaussian likelihood term that fits the actor's spread (its log-std) to
+    #: the residuals of its mean action, before the tanh, with the mean held fixed; 0 leaves
+    #: the spread unfitted (what SAC then samples from is whatever the untrained head gives)
+    spread_weight: float = field(default=0.0, metadata={"min": 0})
     net: NetConfig = field(default_factory=lambda: NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True))
     #: workers planning the demonstrations (Ray when installed, else processes); the demonstrations equal a serial run's
     workers: int = field(default=1, metadata={"min": 1})
@@ -271,7 +275,7 @@ def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: D
     device = torch.device(cfg.device)
     actor = Actor(obs_shape, robot.twist_dim, robot.twist_dim, cfg.net).to(device)
     opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr)
-    losses = fit_actor(actor, opt, demos, robot, env, cfg.epochs, cfg.batch_size, rng, cfg.refresh_every, progress)
+    losses = fit_actor(actor, opt, demos, robot, env, cfg.epochs, cfg.batch_size, rng, cfg.refresh_every, progress, cfg.spread_weight)
     payload = policy_payload(cfg, robot.name, obs_shape, actor, scenario.horizon)
     save_checkpoint(run_dir / "bc.pt", {**payload, "bc_config": to_dict(cfg), "demo_steps": len(demos)})
     return {
@@ -298,6 +302,20 @@ def policy_payload(cfg: BCConfig, robot: str, obs_shape: tuple[int, ...], actor:
     }
 
 
+#: expert actions are clipped to this before the inverse tanh (saturated ones would be infinite)
+_ATANH_CLIP = 0.995
+
+
+def spread_loss(mean: torch.Tensor, log_std: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+    """Negative log-likelihood (up to a constant) of the expert's action before the tanh,
+    ``atanh(a)``, under ``N(mean, exp(log_std))``, with the mean detached: this term fits
+    the spread to the residuals of the mean and does not pull the mean itself (the L2 loss
+    does; the layers both outputs share get gradients from both)."""
+    u = torch.atanh(action.clamp(-_ATANH_CLIP, _ATANH_CLIP))
+    z = (u - mean.detach()) * torch.exp(-log_std)
+    return (0.5 * z**2 + log_std).sum(-1).mean()
+
+
 def fit_actor(
     actor: Actor,
     opt: torch.optim.Optimizer,
@@ -309,10 +327,12 @@ def fit_actor(
     rng: np.random.Generator,
     refresh_every: int = 5,
     progress: bool = True,
+    spread_weight: float = 0.0,
 ) -> list[float]:
     """Fit the actor's mean action to the demonstrations (L2) for ``epochs`` passes (a
     fraction runs part of one); new observation subsets every ``refresh_every`` epochs.
-    Returns the mean loss of each pass."""
+    With ``spread_weight`` the log-std is fitted too (:func:`spread_loss`). Returns the
+    mean L2 loss of each pass."""
     device = next(actor.parameters()).device
     act = torch.as_tensor(demos.action, device=device)
     g_all = torch.as_tensor(goal_input(robot, demos.q, demos.goal), device=device)
@@ -331,9 +351,11 @@ def fit_actor(
         total = 0.0
         for s in range(0, len(perm), batch_size):
             b = perm[s : s + batch_size]
-            loss = ((actor.act(obs[b], g_all[b]) - act[b]) ** 2).sum(-1).mean()
+            mean, log_std = actor(obs[b], g_all[b])
+            loss = ((torch.tanh(mean) - act[b]) ** 2).sum(-1).mean()
+            full = loss + spread_weight * spread_loss(mean, log_std, act[b]) if spread_weight > 0 else loss
             opt.zero_grad(set_to_none=True)
-            loss.backward()
+            full.backward()
             opt.step()
             total += float(loss.detach()) * len(b)
         losses.append(total / max(len(perm), 1))

@@ -181,7 +181,7 @@ def train_dagger(
         if init_actor:
             actor.load_state_dict(load_checkpoint(init_actor, b.device)["actor"])
         else:
-            fit_actor(actor, opt, demos, robot, env, b.epochs, b.batch_size, rng, b.refresh_every, progress)
+            fit_actor(actor, opt, demos, robot, env, b.epochs, b.batch_size, rng, b.refresh_every, progress, b.spread_weight)
     policy = Policy(actor, robot, {"observation": b.observation, "n_points": b.n_points}, b.device)
     val_problems = scenario.problems("val", cfg.eval_episodes, seed=b.seed)
     log = _Log(run_dir / "metrics.csv")
@@ -195,7 +195,7 @@ def train_dagger(
             demos = demos_from_paths(scenario, "train", b.seed, demos.paths + new)
             save_demos(demos_path, scenario, demos, "train", b.seed)
             actor.train()
-            losses = fit_actor(actor, opt, demos, robot, env, cfg.epochs_per_round, b.batch_size, rng, 1, progress)
+            losses = fit_actor(actor, opt, demos, robot, env, cfg.epochs_per_round, b.batch_size, rng, 1, progress, b.spread_weight)
             actor.eval()
             val, nodes = _validate(policy, scenario, env, val_problems, b.seed)
             wall = wall_before + time.perf_counter() - t0
