@@ -166,7 +166,10 @@ def plot(out_dir: Path, path: str) -> None:
         ax.set_ylim(0, 100)
         ax.grid(alpha=0.3)
         ax.set_title({"bc": "behavioural cloning", "rl": "reinforcement learning"}[method])
-        ax.legend(fontsize=8, loc="lower right")
+        if ax.lines:
+            ax.legend(fontsize=8, loc="lower right")
+        else:
+            ax.text(0.5, 0.5, "not run yet", ha="center", va="center", transform=ax.transAxes, color="0.5")
     fig.suptitle("2D-Narrow: obstacle representation x learning method (200 validation problems)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
