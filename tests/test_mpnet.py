@@ -198,3 +198,85 @@ def test_cli_one_checkpoint_for_policy_and_mpnet_is_an_error(capsys: pytest.Capt
 
     assert main(["eval", "--planner", "mpnet-nr,policy", "--checkpoint", "x.pt", "--episodes", "1", "--quiet"]) == 2
     assert "not both" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------- 3D: the sphere
+@pytest.fixture(scope="module")
+def boxes3d() -> object:
+    from pointplan.scenes.scenarios import make_scenario
+
+    return make_scenario("boxes3d", robot="sphere3d")
+
+
+def test_3d_scene_points_are_a_fixed_area_weighted_set_with_normals(boxes3d: object) -> None:
+    from pointplan.scenes.scenarios import Scenario
+
+    assert isinstance(boxes3d, Scenario)
+    scene = boxes3d.problems("test", 1)[0].scene
+    pts, nrm = scene_points(boxes3d.robot, scene, "global", 64)
+    assert pts.shape[1] == 3 and nrm.shape == pts.shape and 0 < len(pts) <= 64
+    np.testing.assert_allclose(np.linalg.norm(nrm, axis=1), 1.0, atol=1e-6)
+    again, _ = scene_points(boxes3d.robot, scene, "global", 64)
+    np.testing.assert_array_equal(pts, again)  # one point set (and encoding) per workspace
+
+
+@pytest.mark.parametrize("hybrid", [False, True])
+def test_3d_shipped_mpnet_found_by_robot_and_paths_certified(boxes3d: object, hybrid: bool) -> None:
+    from pointplan.scenes.scenarios import Scenario
+
+    assert isinstance(boxes3d, Scenario)
+    robot = boxes3d.robot
+    assert shipped_mpnet("sphere3d").stat().st_size < 500_000
+    planner = make_planner("mpnet-hr" if hybrid else "mpnet-nr", robot, seed=0)
+    assert isinstance(planner, MPNetPlanner)
+    assert planner.mpnet.robot.name == "sphere3d" and planner.mpnet.observation == "global" and planner.net.dim == 3
+    solved = 0
+    for p in boxes3d.problems("test", 4, seed=0):
+        res = planner.plan(p)
+        if not res.success:
+            assert not hybrid and res.path.shape == (0, 3)
+            continue
+        solved += 1
+        assert np.array_equal(res.path[0], p.start) and np.array_equal(res.path[-1], p.goal)
+        assert check_path(robot, p, res.path)
+    assert solved >= (4 if hybrid else 2)
+
+
+def test_robot_without_an_mpnet_is_a_clear_error() -> None:
+    from pointplan.robots import make_robot
+
+    sshape = make_robot("sshape")
+    with pytest.raises(ValueError, match="no MPNet ships for robot 'sshape'"):
+        make_planner("mpnet-nr", sshape)
+    with pytest.raises(ValueError, match="translating robots only"):
+        MPNetPlanner(MPNet.from_checkpoint(shipped_mpnet("sphere3d")), sshape)
+
+
+def test_cli_mpnet_train_refuses_the_sshape(capsys: pytest.CaptureFixture[str]) -> None:
+    from pointplan.cli import main
+
+    assert main(["mpnet-train", "--env", "boxes3d", "--robot", "sshape", "--quiet"]) == 2
+    assert "translating robots only" in capsys.readouterr().err
+
+
+def test_3d_training_smoke(tmp_path: object) -> None:
+    from pathlib import Path
+
+    from pointplan.learning.mpnet import MPNetTrainConfig, train_mpnet
+
+    run = Path(str(tmp_path))
+    cfg = MPNetTrainConfig(
+        env="boxes3d",
+        robot="sphere3d",
+        n_points=32,
+        n_problems=4,
+        val_demo_problems=2,
+        val_problems=2,
+        test_problems=0,
+        epochs=1,
+        net=MPNetNetConfig(encoder_width=8, width=16, layers=2),
+    )
+    train_mpnet(cfg, run, progress=False)
+    net = MPNet.from_checkpoint(run / "best.pt")
+    assert net.robot.name == "sphere3d" and net.observation == "global" and net.n_points == 32
+    assert net.numpy().layers[0][0].shape == (8 + 6, 16)

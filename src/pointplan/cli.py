@@ -701,6 +701,7 @@ MPNET_OPTIONS = {
     "val-demos": "val_demos_file",
     "val-problems": "val_problems",
     "test-problems": "test_problems",
+    "n-points": "n_points",
     "waypoint-step": "waypoint_step",
     "subgoal-prob": "subgoal_prob",
     "epochs": "epochs",
@@ -722,11 +723,13 @@ MPNET_OPTIONS = {
 def cmd_mpnet_train(args: argparse.Namespace) -> int:
     from .config import given_options, replace_paths
     from .learning.mpnet import MPNetTrainConfig, train_mpnet
-    from .scenes.scenarios import is_3d
+    from .models.mpnet import check_translating
 
-    if is_3d(args.env):
-        raise CLIError("mpnet-train trains the 2D disc (--env narrow2d); MPNet in 3D is not implemented yet")
-    cfg = replace_paths(MPNetTrainConfig(env=args.env), given_options(args, MPNET_OPTIONS))
+    try:
+        check_translating(_scenario(args).robot)
+    except ValueError as e:
+        raise CLIError(f"mpnet-train: {e}") from None
+    cfg = replace_paths(MPNetTrainConfig(env=args.env, robot=args.robot), given_options(args, MPNET_OPTIONS))
     res = train_mpnet(cfg, args.run_dir, progress=not args.quiet)
     v = res.best_val
     print(
@@ -978,7 +981,10 @@ def _add_mpnet_parser(sub: Any) -> None:
         "mpnet-train",
         "train MPNet (mpnet-nr, mpnet-hr) on Bi-RRT paths of training problems; model selection on validation problems, one test at the end (best.pt, last.pt, metrics.csv, summary.json in --run-dir)",
     )
-    p.add_argument("--env", default="narrow2d", help="scenario to train on (default: %(default)s; the 2D disc only for now)")
+    p.add_argument(
+        "--env", default="narrow2d", help="scenario to train on: narrow2d (the disc) or a 3D scenario with the sphere, e.g. boxes3d (default: %(default)s)"
+    )
+    p.add_argument("--robot", help="sphere3d for the 3D scenarios (the default there; MPNet plans translating robots only, not sshape)")
     add_config_options(p, MPNetTrainConfig(), MPNET_OPTIONS)
     p.add_argument("--run-dir", default="runs/mpnet", help="where checkpoints and logs go (default: %(default)s)")
     p.add_argument("--json", help="also write the summary to this JSON file")

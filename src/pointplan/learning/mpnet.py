@@ -1,6 +1,7 @@
 """Training MPNet (Qureshi et al. 2019) on Bi-RRT paths of the training split.
 
-Data. Bi-RRT solutions (shortcut) of training problems, as behavioural cloning plans them
+Data. Bi-RRT solutions (shortcut) of training problems (2D-Narrow with the disc, or a 3D
+scenario with the sphere: the shipped 3D network is trained on 3D-Boxes), as behavioural cloning plans them
 (:func:`pointplan.learning.bc.generate_demos`, one problem per training workspace). Those
 come cut into policy steps; the shortcut path's own vertices are recovered (consecutive
 collinear pieces merged) and every segment is cut again into equal pieces no longer than
@@ -37,7 +38,17 @@ import torch
 
 from ..evaluation import evaluate
 from ..models.checkpoint import save_checkpoint, to_dict
-from ..models.mpnet import MPNet, MPNetModel, MPNetNetConfig, encoder_input, mpnet_payload, scale_positions
+from ..models.mpnet import (
+    OBSERVATION_3D,
+    MPNet,
+    MPNetModel,
+    MPNetNetConfig,
+    check_translating,
+    default_observation,
+    encoder_input,
+    mpnet_payload,
+    scale_positions,
+)
 from ..planners.mpnet import MPNetPlanner, scene_points
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
@@ -49,6 +60,10 @@ class MPNetTrainConfig:
     """An MPNet training run (saved with its checkpoints)."""
 
     env: str = "narrow2d"
+    #: the robot (None: the scenario's default; in 3D only the sphere, ``sphere3d``, translates)
+    robot: str | None = None
+    #: 3D: area-weighted surface points per workspace the encoder reads (the global observer's pool)
+    n_points: int = field(default=512, metadata={"min": 1})
     #: training problems planned by Bi-RRT (one per training workspace)
     n_problems: int = field(default=4000, metadata={"min": 1})
     #: a file of training demonstrations: loaded if it exists, written after planning otherwise
@@ -129,7 +144,9 @@ class PathSet:
         return int(self.points.shape[0])
 
 
-def make_path_set(demos: Demos, robot: Robot, center: np.ndarray, step: float, waypoint_step: float) -> PathSet:
+def make_path_set(
+    demos: Demos, robot: Robot, center: np.ndarray, step: float, waypoint_step: float, observation: str | None = None, n_points: int = 0
+) -> PathSet:
     """The training (or validation) paths of ``demos``."""
     ins: list[np.ndarray] = []
     wps: list[np.ndarray] = []
@@ -140,7 +157,7 @@ def make_path_set(demos: Demos, robot: Robot, center: np.ndarray, step: float, w
     problem_of = dict(zip(unique, demos.problems))
     for d, (index, steps) in enumerate(demos.paths):
         problem = problem_of[index]
-        pts, nrm = scene_points(robot, problem.scene)
+        pts, nrm = scene_points(robot, problem.scene, observation, n_points)
         ins.append(encoder_input(pts, nrm, center, step))
         w = cut_path(path_vertices(steps), waypoint_step)
         for seq in (w, w[::-1]):
@@ -235,8 +252,11 @@ def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = Tru
     run_dir.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0x3B9E7]))
-    scenario = make_scenario(cfg.env)
+    scenario = make_scenario(cfg.env, robot=cfg.robot)
     robot = scenario.robot
+    check_translating(robot)
+    observation = default_observation(robot)
+    n_points = int(cfg.n_points) if observation == OBSERVATION_3D else 0
     low, high = scenario.bounds
     center = (np.asarray(low) + np.asarray(high)) / 2
     step = float(robot.action_scale[0])
@@ -244,8 +264,8 @@ def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = Tru
     t0 = time.perf_counter()
     train_demos = _demos(scenario, cfg.n_problems, "train", cfg.demos_file, cfg, progress)
     val_demos = _demos(scenario, cfg.val_demo_problems, "val", cfg.val_demos_file, cfg, progress)
-    train_set = make_path_set(train_demos, robot, center, step, cfg.waypoint_step)
-    val_set = make_path_set(val_demos, robot, center, step, cfg.waypoint_step)
+    train_set = make_path_set(train_demos, robot, center, step, cfg.waypoint_step, observation, n_points)
+    val_set = make_path_set(val_demos, robot, center, step, cfg.waypoint_step, observation, n_points)
     val_problems = scenario.problems("val", cfg.val_problems, seed=cfg.seed)
     demo_time = time.perf_counter() - t0
 
@@ -257,7 +277,7 @@ def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = Tru
     extra = {"train_config": to_dict(cfg), "demo_problems": len(train_demos.paths), "waypoints": int(len(train_set.waypoints))}
 
     def snapshot(m: MPNetModel) -> MPNet:
-        return MPNet(copy.deepcopy(m).eval(), robot, center, step, {})
+        return MPNet(copy.deepcopy(m).eval(), robot, center, step, {}, observation, n_points)
 
     history: list[dict[str, float]] = []
     best: tuple[float, float] | None = None
@@ -287,7 +307,9 @@ def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = Tru
             m = evaluate(planner, val_problems, robot, progress=False).metrics()
             row.update(val_success=m["success_rate"], val_nodes=m["nodes_mean"], val_checks=m["collision_checks_mean"], val_path_length=m["path_length_mean"])
             key = (row["val_success"], -row["val_loss"])
-            payload = mpnet_payload(model, scenario.name, robot, center, step, epoch=ep, val={k: float(v) for k, v in row.items()}, **extra)
+            payload = mpnet_payload(
+                model, scenario.name, robot, center, step, observation, n_points, epoch=ep, val={k: float(v) for k, v in row.items()}, **extra
+            )
             if best is None or key > best:
                 best, best_epoch, best_val = key, ep, dict(row)
                 save_checkpoint(run_dir / "best.pt", payload)

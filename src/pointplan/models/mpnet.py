@@ -1,8 +1,12 @@
 """MPNet's networks (Qureshi et al. 2019): an obstacle encoder and a planning network.
 
 The **encoder** is a PointNet (:class:`~pointplan.models.encoders.PointNetEncoder`) on the
-scene's boundary points with outward normals in the world frame (the ``surface-normals``
-observer's point set, every point of it: no random subset), computed once per workspace.
+scene's obstacle surface points with outward normals in the world frame, computed once per
+workspace. In 2D: the ``surface-normals`` observer's point set, every point of it (no
+random subset). In 3D: ``n_points`` (512) points drawn on the obstacles' faces in
+proportion to their area, the ``global`` observer's pool with that many points (drawn once
+per workspace from a generator seeded by the workspace's name, so a scene has one point set
+and one encoding). The checkpoint records which (``observation``, ``n_points``).
 The **planning network** ("Pnet") is an MLP with dropout after every hidden layer; from the
 encoding ``z``, a configuration ``q`` and a goal ``g`` it predicts the next configuration on
 the way, ``q + step * f(z, q, g)``. Its dropout stays on when planning: it is the planner's
@@ -36,10 +40,28 @@ from .encoders import PointNetEncoder
 
 #: what ``kind`` an MPNet checkpoint says it holds
 KIND = "mpnet"
-#: the observation the encoder reads (the point set of the surface-normals observer)
+#: the observation the encoder reads in 2D (the point set of the surface-normals observer)
 OBSERVATION = "surface-normals"
+#: the observation the encoder reads in 3D (the global observer's area-weighted surface pool)
+OBSERVATION_3D = "global"
+#: surface points per workspace in 3D (the global observer's pool size)
+N_POINTS_3D = 512
 #: MPNet checkpoints that ship inside the package: robot -> file in ``pointplan/data``
-SHIPPED_MPNET: dict[str, str] = {"disc2d": "narrow2d_mpnet.pt"}
+SHIPPED_MPNET: dict[str, str] = {"disc2d": "narrow2d_mpnet.pt", "sphere3d": "boxes3d_sphere_mpnet.pt"}
+
+
+def default_observation(robot: Robot) -> str:
+    """The encoder's observation for ``robot``: ``surface-normals`` in 2D, ``global`` in 3D."""
+    return OBSERVATION_3D if robot.dim == 3 else OBSERVATION
+
+
+def check_translating(robot: Robot) -> None:
+    """MPNet here plans positions: robots whose configuration is their position (the 2D disc,
+    the 3D sphere). Raises ValueError for others (the S-shape's pose has a rotation)."""
+    if robot.config_dim != robot.dim:
+        raise ValueError(
+            f"MPNet plans translating robots only (disc2d, sphere3d); {robot.name!r} has a {robot.config_dim}-dimensional configuration in {robot.dim}D"
+        )
 
 
 @dataclass(frozen=True)
@@ -163,6 +185,10 @@ class MPNet:
     center: np.ndarray
     step: float
     meta: dict[str, Any]
+    #: the observation the encoder reads (``surface-normals`` in 2D, ``global`` in 3D)
+    observation: str = OBSERVATION
+    #: surface points per workspace (``global`` only; 0: the observer's whole point set)
+    n_points: int = 0
 
     def numpy(self) -> NumpyMPNet:
         return NumpyMPNet(self.model, self.center, self.step)
@@ -177,16 +203,21 @@ class MPNet:
         model = MPNetModel(robot.dim, int(data["point_features"]), cfg)
         model.load_state_dict(data["model"])
         meta = {k: v for k, v in data.items() if k != "model"}
-        return cls(model.eval(), robot, np.asarray(data["center"], np.float64), float(data["step"]), meta)
+        observation = str(data.get("observation", default_observation(robot)))
+        n_points = int(data.get("n_points", N_POINTS_3D if observation == OBSERVATION_3D else 0))
+        return cls(model.eval(), robot, np.asarray(data["center"], np.float64), float(data["step"]), meta, observation, n_points)
 
 
-def mpnet_payload(model: MPNetModel, env: str, robot: Robot, center: np.ndarray, step: float, **extra: Any) -> dict[str, Any]:
+def mpnet_payload(
+    model: MPNetModel, env: str, robot: Robot, center: np.ndarray, step: float, observation: str | None = None, n_points: int = 0, **extra: Any
+) -> dict[str, Any]:
     """What an MPNet checkpoint holds (``extra``: plain data such as the training config)."""
     return {
         "kind": KIND,
         "env": env,
         "robot": robot.name,
-        "observation": OBSERVATION,
+        "observation": observation or default_observation(robot),
+        "n_points": int(n_points),
         "point_features": 2 * robot.dim,
         "net": to_dict(model.cfg),
         "model": model.state_dict(),
@@ -197,16 +228,29 @@ def mpnet_payload(model: MPNetModel, env: str, robot: Robot, center: np.ndarray,
 
 
 def shipped_mpnet(robot: str = "disc2d") -> Path:
-    """The MPNet checkpoint shipped for ``robot`` (docs/results.md: how it was trained)."""
+    """The MPNet checkpoint shipped for ``robot`` (``disc2d``: trained in 2D-Narrow;
+    ``sphere3d``: trained in 3D-Boxes, used in every 3D scenario; docs/results.md)."""
     from importlib.resources import files
 
     name = SHIPPED_MPNET.get(robot)
     path = Path(str(files("pointplan") / "data" / name)) if name else None
     if path is None or not path.is_file():
         raise ValueError(
-            f"no MPNet ships for robot {robot!r} (shipped: {', '.join(SHIPPED_MPNET)}); pass checkpoint=PATH, or train one with `pointplan mpnet-train`"
+            f"no MPNet ships for robot {robot!r} (shipped for: {', '.join(SHIPPED_MPNET)}; MPNet plans translating robots only); "
+            "pass checkpoint=PATH (--checkpoint), or train one with `pointplan mpnet-train`"
         )
     return path
 
 
-__all__ = ["MPNet", "MPNetModel", "MPNetNetConfig", "NumpyMPNet", "encoder_input", "mpnet_payload", "scale_positions", "shipped_mpnet"]
+__all__ = [
+    "MPNet",
+    "MPNetModel",
+    "MPNetNetConfig",
+    "NumpyMPNet",
+    "check_translating",
+    "default_observation",
+    "encoder_input",
+    "mpnet_payload",
+    "scale_positions",
+    "shipped_mpnet",
+]

@@ -60,7 +60,7 @@ PLANNERS["hybrid"] = _hybrid_factory
 def _mpnet_factory(hybrid: bool) -> Callable[..., Planner]:
     def make(robot: Robot, checkpoint: Any = None, **kw: Any) -> Planner:
         """MPNet (``checkpoint``: a path or a loaded ``MPNet``; default: the one that ships
-        for ``robot``); keywords go to :class:`~pointplan.planners.mpnet.MPNetPlanner`
+        for ``robot``, ``disc2d`` or ``sphere3d``; a ValueError for other robots); keywords go to :class:`~pointplan.planners.mpnet.MPNetPlanner`
         (``seed``, ``max_nodes`` of the hybrid's Bi-RRT, ``replan_iters``, ...)."""
         from .mpnet import MPNetPlanner
 

@@ -59,13 +59,21 @@ from .birrt import BiRRT
 _CONTRACT_BATCH = 16
 
 
-def scene_points(robot: Robot, scene: Scene) -> tuple[Array, Array]:
-    """The world points and outward normals MPNet's encoder reads for ``scene``: the whole
-    point set of the ``surface-normals`` observer (cached on the scene, as the observer's)."""
-    from ..models.mpnet import OBSERVATION
+def scene_points(robot: Robot, scene: Scene, observation: str | None = None, n_points: int = 0) -> tuple[Array, Array]:
+    """The world points and outward normals MPNet's encoder reads for ``scene`` (cached on
+    the scene, as the observers'). ``surface-normals`` (2D default): the observer's whole
+    point set. ``global`` (3D default): the global observer's pool of ``n_points`` (default
+    512) area-weighted surface points, drawn once per workspace (seeded by its name)."""
+    from ..models.mpnet import N_POINTS_3D, OBSERVATION_3D, default_observation
     from ..observers import make_observer
+    from ..observers.points import GlobalPoints
 
-    observer = make_observer(OBSERVATION, robot)
+    observation = observation or default_observation(robot)
+    if observation == OBSERVATION_3D:
+        n = int(n_points) or N_POINTS_3D
+        pts, nrm, _ = GlobalPoints(robot, n_points=n, pool_size=n).pool(scene)
+        return pts, nrm
+    observer = make_observer(observation, robot)
     observer.bind([scene])
     return observer.points_one()  # type: ignore[attr-defined,no-any-return]
 
@@ -197,13 +205,14 @@ class MPNetPlanner:
         seed: int = 0,
         dropout: bool = True,
     ) -> None:
-        from ..models.mpnet import MPNet
+        from ..models.mpnet import MPNet, check_translating
 
         if isinstance(model, (str, Path)):
             model = MPNet.from_checkpoint(model)
         assert isinstance(model, MPNet)
         self.mpnet = model
         self.robot = robot or model.robot
+        check_translating(self.robot)
         if self.robot.name != model.robot.name:
             raise ValueError(f"the MPNet was trained for robot {model.robot.name!r}, not {self.robot.name!r}")
         self.net = model.numpy()
@@ -235,7 +244,7 @@ class MPNetPlanner:
         """The encoder's feature of ``scene``."""
         from ..models.mpnet import encoder_input
 
-        pts, nrm = scene_points(self.robot, scene)
+        pts, nrm = scene_points(self.robot, scene, self.mpnet.observation, self.mpnet.n_points)
         return self.net.encode(encoder_input(pts, nrm, self.net.center, self.net.step))
 
     # ------------------------------------------------------------------ pieces
