@@ -415,3 +415,80 @@ def test_cloning_can_fit_the_spread_to_the_residuals(tmp_path: Path) -> None:
     assert abs(np.log(std / rms)) < 0.25  # (measured: 0.58 against 0.64)
     assert abs(np.log(std / rms)) < 0.5 * abs(np.log(std_plain / rms_plain))  # unfitted: 0.95 against 0.63
     assert loss_spread < 1.5 * loss_plain + 0.02
+
+
+def test_demonstrations_replay_as_the_environment_would_give_them() -> None:
+    """``demo_episodes``: stepping a fresh environment from each demonstration's start with
+    its actions gives the same configurations, no collision, the same rewards and success
+    exactly at the episode's last step."""
+    from pointplan.envs.core import BatchedCore, step_reward
+    from pointplan.learning.bc import demo_episodes
+
+    scenario = Narrow2DScenario()
+    demos = generate_demos(scenario, 12, seed=3, progress=False)
+    env = EnvConfig(observation="surface-normals", n_points=32, split="train")
+    episodes = demo_episodes(demos, scenario.robot, env, np.random.default_rng(0), horizon=scenario.horizon)
+    assert len(episodes) == len(demos.paths)
+    core = BatchedCore(scenario, 1, env)
+    rng = np.random.default_rng(1)
+    row = 0
+    for (index, path), (obs, next_obs, q, q_next, goal, action, norm, collided) in zip(demos.paths, episodes):
+        problem = demos.problems[int(demos.scene[row])]
+        row += len(path) - 1
+        assert obs.shape == (len(q), 32, 4) and next_obs.shape == obs.shape
+        core.reset_envs([0], rng, [problem])
+        np.testing.assert_allclose(core.q[0], q[0])
+        for t in range(len(q)):
+            _, term, trunc, info = core.step(action[t : t + 1])
+            np.testing.assert_allclose(core.q[0], q_next[t], atol=1e-9)
+            assert not info["collided"][0] and not collided[t]
+            if abs(float(scenario.robot.distance(q_next[t], goal[t])) - env.goal_tolerance) < 1e-9:
+                break  # on the tolerance to rounding: either answer is right
+            reward = step_reward(env, norm[t : t + 1], collided[t : t + 1], np.array([t == len(q) - 1]))
+            np.testing.assert_allclose(reward, step_reward(env, info["action_norm"], info["collided"], term))
+            assert bool(term[0]) == (t == len(q) - 1)
+            if term[0] or trunc[0]:
+                break
+        else:
+            raise AssertionError("the episode did not end")
+
+
+def test_training_with_demonstrations_in_the_batches(tmp_path: Path) -> None:
+    """``demo_share``: a quarter of every batch comes from the demonstrations' own buffer."""
+    from dataclasses import replace
+
+    from pointplan.learning import train as train_mod
+    from pointplan.learning.bc import save_demos
+    from pointplan.learning.sac import SACConfig
+    from pointplan.scenes.scenarios import make_scenario
+
+    scenario = make_scenario("empty2d")
+    demos = generate_demos(scenario, 10, seed=0, progress=False)
+    save_demos(tmp_path / "demos.npz", scenario, demos, "train", 0)
+    cfg = TrainConfig(
+        env="empty2d", num_envs=4, total_steps=300, warmup_steps=100, eval_every=300, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32), demo_share=0.25
+    )
+    with pytest.raises(ValueError, match="--demos"):
+        train(cfg, tmp_path / "a", progress=False)
+    cfg = replace(cfg, demos=str(tmp_path / "demos.npz"))
+    seen = []
+    real = train_mod._sample
+
+    def spy(run):  # type: ignore[no-untyped-def]
+        b = real(run)
+        seen.append((len(b.q), run.demo_buffer.size, b.q[-8:].copy()))
+        return b
+
+    train_mod._sample = spy
+    try:
+        res = train(cfg, tmp_path / "b", progress=False)
+    finally:
+        train_mod._sample = real
+    assert seen and np.isfinite(res.history[-1]["critic_loss"])
+    n, demo_size, tail = seen[-1]
+    assert n == 32 and 0.5 * len(demos) < demo_size <= len(demos)  # (cut where each arrives)
+    # the batch's last 8 rows are demonstration steps: configurations of the expert paths
+    expert = np.concatenate([p[:-1] for _, p in demos.paths])
+    assert all(np.min(np.abs(expert - q).sum(-1)) < 1e-12 for q in tail)
+    with pytest.raises(ValueError, match="demo_share"):
+        train(replace(cfg, demo_share=1.0), tmp_path / "c", progress=False)

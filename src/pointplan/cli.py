@@ -492,6 +492,7 @@ TRAIN_OPTIONS = {
     "action-cost": "action_cost",
     "demos": "demos",
     "demo-refresh": "demo_refresh",
+    "demo-share": "demo_share",
     "bc-weight": "sac.bc_weight",
     "bc-q-filter": "sac.bc_q_filter",
     "lr": "sac.lr",

@@ -220,6 +220,58 @@ def observe_demos(demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Gen
     return np.concatenate(out)
 
 
+def demo_episodes(demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Generator, horizon: int | None = None) -> list[tuple[np.ndarray, ...]]:
+    """The demonstration paths as the episodes an environment would have produced, in
+    :meth:`~pointplan.learning.replay.EpisodeReplay.add_episode`'s order (obs, next_obs,
+    q, q_next, goal, action, action_norm, collided): each step moves from ``q_t`` to
+    ``q_{t+1}`` with the expert action, collision-free (the paths are certified); an
+    episode ends at the first step within the goal tolerance, or after ``horizon`` steps."""
+    from ..envs.core import goal_reached
+
+    episodes: list[tuple[np.ndarray, ...]] = []
+    configs: list[np.ndarray] = []
+    scenes: list[np.ndarray] = []
+    spans: list[tuple[int, int, int, np.ndarray]] = []
+    row = 0
+    for _, path in demos.paths:
+        n = len(path) - 1
+        if n <= 0:
+            continue
+        p = int(demos.scene[row])
+        goal = demos.problems[p].goal
+        reached = goal_reached(robot, env, path[1:], np.broadcast_to(goal, path[1:].shape))
+        t_end = int(np.argmax(reached)) + 1 if reached.any() else n
+        if horizon is not None:
+            t_end = min(t_end, int(horizon))
+        spans.append((row, t_end, len(configs), goal))
+        configs.append(path[: t_end + 1])
+        scenes.append(np.full(t_end + 1, p))
+        row += n
+    if not configs:
+        return episodes
+    q_all, scene_all = np.concatenate(configs), np.concatenate(scenes)
+    view = Demos(q_all, q_all, np.zeros((len(q_all), robot.twist_dim), np.float32), scene_all, demos.problems)
+    obs_all = observe_demos(view, robot, env, rng)
+    start = 0
+    for (row, t_end, _, goal), c in zip(spans, configs):
+        obs = obs_all[start : start + t_end + 1]
+        action = demos.action[row : row + t_end]
+        episodes.append(
+            (
+                obs[:-1],
+                obs[1:],
+                c[:-1],
+                c[1:],
+                np.broadcast_to(goal, c[:-1].shape).copy(),
+                action,
+                np.linalg.norm(action, axis=-1).astype(np.float64),
+                np.zeros(t_end, bool),
+            )
+        )
+        start += t_end + 1
+    return episodes
+
+
 @dataclass(frozen=True)
 class BCConfig:
     """A behavioural-cloning run (saved with its checkpoint)."""

@@ -10,6 +10,7 @@ are kept in the run directory with ``metrics.csv`` and TensorBoard logs.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import signal
 import sys
 import threading
@@ -30,7 +31,7 @@ from ..models.encoders import EncoderConfig
 from ..scenes.scenarios import make_scenario
 from ..scenes.scene import Problem
 from .curriculum import EpisodeSource, FailurePool
-from .replay import EpisodeReplay
+from .replay import Batch, EpisodeReplay
 from .sac import SAC, DemoBatch, SACConfig
 
 
@@ -82,6 +83,10 @@ class TrainConfig:
     demos: str | None = None
     #: gradient steps between two fresh draws of the demonstrations' observation subsets
     demo_refresh: int = field(default=20_000, metadata={"min": 1})
+    #: share of every gradient step's batch drawn from the demonstrations (``--demos``)
+    #: replayed as episodes, in a buffer of their own that is never overwritten (as in
+    #: Nair et al. 2018); 0 learns from the agent's own experience only
+    demo_share: float = field(default=0.0, metadata={"min": 0})
 
 
 @dataclass
@@ -216,6 +221,7 @@ class _Run:
     demo_goal: Any = None
     demo_action: Any = None
     demo_drawn_at: int = -1
+    demo_buffer: Any = None
 
     @property
     def wall(self) -> float:
@@ -251,8 +257,12 @@ def _start(cfg: TrainConfig, run_dir: Path, resume: str | Path | None, remote: A
     if cfg.retry_failures > 0 or cfg.mine_episodes > 0:
         run.pool = FailurePool(cfg.pool_size, cfg.pool_retries)
     run.source = EpisodeSource(core, run.pool, cfg.retry_failures)
-    if cfg.sac.bc_weight > 0:
+    if not 0 <= cfg.demo_share < 1:
+        raise ValueError(f"demo_share must be in [0, 1), not {cfg.demo_share}")
+    if cfg.sac.bc_weight > 0 or cfg.demo_share > 0:
         _load_demos(run)
+    if cfg.demo_share > 0:
+        run.demo_buffer = _demo_replay(run)
     if remote is None:  # (rollout workers start their own environments)
         run.source.reset(range(cfg.num_envs), rng)
         run.obs = core.observe(rng)["observation"]
@@ -268,13 +278,37 @@ def _load_demos(run: _Run) -> None:
 
     cfg, robot = run.cfg, run.scenario.robot
     if not cfg.demos:
-        raise ValueError("--bc-weight needs demonstrations: give --demos FILE (written by `pointplan bc --demos FILE`)")
+        raise ValueError("--bc-weight and --demo-share need demonstrations: give --demos FILE (written by `pointplan bc --demos FILE`)")
     if not Path(cfg.demos).exists():
         raise FileNotFoundError(f"--demos {cfg.demos}: no such file (write one with `pointplan bc --demos {cfg.demos}`)")
     run.demos = load_demos(cfg.demos, run.scenario)
     agent = run.agent
     run.demo_goal = agent.tensor(goal_input(robot, run.demos.q, run.demos.goal))
     run.demo_action = agent.tensor(run.demos.action)
+
+
+def _demo_replay(run: _Run) -> EpisodeReplay:
+    """The demonstrations as episodes in a buffer of their own (observations drawn once)."""
+    from .bc import demo_episodes
+
+    robot = run.scenario.robot
+    episodes = demo_episodes(run.demos, robot, run.env_cfg, run.rng, run.core.horizon)
+    buf = EpisodeReplay(sum(len(e[2]) for e in episodes), run.obs_shape, robot.config_dim, robot.twist_dim)
+    for episode in episodes:
+        buf.add_episode(*episode)
+    return buf
+
+
+def _sample(run: _Run) -> Batch:
+    """A training batch: ``demo_share`` of it from the demonstrations' buffer when kept."""
+    cfg = run.cfg
+    n = cfg.sac.batch_size
+    if run.demo_buffer is None:
+        return run.buffer.sample(n, run.rng, cfg.sac.her_ratio)
+    k = int(round(cfg.demo_share * n))
+    own = run.buffer.sample(n - k, run.rng, cfg.sac.her_ratio)
+    demo = run.demo_buffer.sample(k, run.rng, cfg.sac.her_ratio)
+    return Batch(**{f.name: np.concatenate([getattr(own, f.name), getattr(demo, f.name)]) for f in dataclasses.fields(Batch)})
 
 
 def _demo_batch(run: _Run) -> DemoBatch | None:
@@ -362,7 +396,7 @@ def _learn(run: _Run, collected: int) -> None:
         run.credit += collected * cfg.updates_per_step
         while run.credit >= 1.0:
             demo = _demo_batch(run) if run.agent.updates >= cfg.sac.actor_delay else None
-            run.last_losses = run.agent.update(run.buffer.sample(cfg.sac.batch_size, run.rng, cfg.sac.her_ratio), demo)
+            run.last_losses = run.agent.update(_sample(run), demo)
             run.credit -= 1.0
 
 
