@@ -1,6 +1,6 @@
 """Bi-RRT on chosen test problems of a scenario, one JSON line per problem (appended as each
-finishes, so a long run can be split over processes and stopped at any time), and a
-summary of such files.
+finishes, so a long run can be split over processes and stopped at any time; a run
+skips the problems its file holds already, so it resumes), and a summary of such files.
 
     python scripts/birrt_problems.py run --env slot --robot sshape --max-nodes 50000 \\
         --start 0 --stop 100 --every 2 --out runs/slot_even.jsonl
@@ -29,7 +29,12 @@ def run(args: argparse.Namespace) -> None:
     sc = make_scenario(args.env, robot=args.robot)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    done = {json.loads(line)["index"] for line in out.read_text().splitlines() if line.strip()} if out.exists() else set()
+    if done:
+        print(f"{out}: {len(done)} problems done already, skipped", flush=True)
     for i in range(args.start, args.stop, args.every):
+        if i in done:
+            continue
         problem = sc.problem("test", i, seed=0)
         planner = make_planner("birrt", sc.robot, seed=i, max_nodes=args.max_nodes)
         t0 = time.perf_counter()
