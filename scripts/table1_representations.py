@@ -103,16 +103,43 @@ def run_bc(cell: str, args: argparse.Namespace) -> dict:
     val = scenario.problems("val", args.val_episodes, seed=0)
     run_dir = Path(args.runs) / f"{cell.replace(':', '_')}_bc"
     run_dir.mkdir(parents=True, exist_ok=True)
-    curve, best, t0 = [], -1.0, time.perf_counter()
-    for done in range(args.bc_eval_every, args.bc_epochs + 1, args.bc_eval_every):
+    curve: list[dict] = []
+    best, before, start = -1.0, 0.0, args.bc_eval_every
+    state_file = run_dir / "state.pt"
+    if state_file.exists() and not args.redo:  # a run stopped between two validations: resume
+        state = torch.load(state_file, map_location="cpu", weights_only=True)
+        if state["epochs_total"] == args.bc_epochs and state["eval_every"] == args.bc_eval_every:
+            actor.load_state_dict(state["actor"])
+            opt.load_state_dict(state["opt"])
+            rng.bit_generator.state = state["rng"]
+            torch.set_rng_state(state["torch_rng"])
+            curve, best, before = list(state["curve"]), float(state["best"]), float(state["wall_time_s"])
+            start = int(state["done"]) + args.bc_eval_every
+            print(f"{cell} bc: resuming after {state['done']} epochs ({state_file})", file=sys.stderr)
+    t0 = time.perf_counter() - before
+    for done in range(start, args.bc_epochs + 1, args.bc_eval_every):
         fit_actor(actor, opt, demos, robot, env, args.bc_eval_every, cfg.batch_size, rng, cfg.refresh_every, progress=False)
         success = validate(actor, robot, env, val, scenario.horizon)
         curve.append({"epochs": done, "val_success": success, "wall_time_s": time.perf_counter() - t0})
-        print(f"{cell} bc: {done} epochs, val {success:.3f}", file=sys.stderr)
+        print(f"{cell} bc: {done} epochs, val {success:.3f}", file=sys.stderr, flush=True)
         payload = policy_payload(cfg, robot.name, shape, actor, scenario.horizon)
         if success > best:
             best = success
             save_checkpoint(run_dir / "best.pt", {**payload, "bc_config": to_dict(cfg), "demo_steps": len(demos)})
+        state = {
+            "actor": actor.state_dict(),
+            "opt": opt.state_dict(),
+            "rng": rng.bit_generator.state,
+            "torch_rng": torch.get_rng_state(),
+            "curve": curve,
+            "best": best,
+            "done": done,
+            "epochs_total": args.bc_epochs,
+            "eval_every": args.bc_eval_every,
+            "wall_time_s": time.perf_counter() - t0,
+        }
+        torch.save(state, state_file.with_suffix(".tmp"))
+        state_file.with_suffix(".tmp").replace(state_file)
     test = test_eval(run_dir / "best.pt", args.test_episodes, run_dir / "test.json")
     return {"demo_problems": len(demos.problems), "demo_steps": len(demos), "curve": curve, "best_val": best, "test": test}
 
