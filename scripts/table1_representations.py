@@ -68,10 +68,13 @@ def validate(actor: torch.nn.Module, robot: object, env: object, problems: list,
     return float(np.mean([r.success for r in res]))
 
 
-def test_eval(checkpoint: Path, episodes: int, json_path: Path) -> dict:
-    """The selected checkpoint on the test problems, once, through the CLI."""
+def test_eval(checkpoint: Path, episodes: int, json_path: Path, greedy: bool = True) -> dict:
+    """The selected checkpoint on the test problems, once, through the CLI: the policy
+    planner as it ships (``greedy``: it stops where the straight edge to the goal is
+    certified free) or the plain rollout to the goal tolerance (the paper's protocol)."""
     cmd = ["pointplan", "eval", "--env", "narrow2d", "--planner", "policy", "--checkpoint", str(checkpoint)]
     cmd += ["--episodes", str(episodes), "--seed", "0", "--json", str(json_path)]
+    cmd += [] if greedy else ["--no-greedy-goal"]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     data = json.loads(json_path.read_text())
     return data[0] if isinstance(data, list) else data
@@ -141,7 +144,8 @@ def run_bc(cell: str, args: argparse.Namespace) -> dict:
         torch.save(state, state_file.with_suffix(".tmp"))
         state_file.with_suffix(".tmp").replace(state_file)
     test = test_eval(run_dir / "best.pt", args.test_episodes, run_dir / "test.json")
-    return {"demo_problems": len(demos.problems), "demo_steps": len(demos), "curve": curve, "best_val": best, "test": test}
+    rollout = test_eval(run_dir / "best.pt", args.test_episodes, run_dir / "test_rollout.json", greedy=False)
+    return {"demo_problems": len(demos.problems), "demo_steps": len(demos), "curve": curve, "best_val": best, "test": test, "test_rollout": rollout}
 
 
 def run_rl(cell: str, args: argparse.Namespace) -> dict:
@@ -171,7 +175,8 @@ def run_rl(cell: str, args: argparse.Namespace) -> dict:
     if res.interrupted:
         return {"curve": curve, "interrupted": True}
     test = test_eval(run_dir / "best.pt", args.test_episodes, run_dir / "test.json")
-    return {"curve": curve, "best_val": res.best_success, "test": test}
+    rollout = test_eval(run_dir / "best.pt", args.test_episodes, run_dir / "test_rollout.json", greedy=False)
+    return {"curve": curve, "best_val": res.best_success, "test": test, "test_rollout": rollout}
 
 
 def plot(out_dir: Path, path: str) -> None:
@@ -204,16 +209,18 @@ def plot(out_dir: Path, path: str) -> None:
 
 
 def table(out_dir: Path) -> None:
-    print("| representation | encoder | paper BC | ours BC | paper RL | ours RL |")
-    print("|---|---|---|---|---|---|")
+    print("| representation | encoder | paper BC | ours BC (rollout) | ours BC (planner) | paper RL | ours RL (rollout) | ours RL (planner) |")
+    print("|---|---|---|---|---|---|---|---|")
     for cell, (p_bc, p_rl) in PAPER.items():
         obs, enc = CELLS[cell]
         ours = []
         for method in ("bc", "rl"):
             f = out_dir / f"{cell.replace(':', '_')}_{method}.json"
-            test = json.loads(f.read_text()).get("test") if f.exists() else None
-            ours.append(f"{100 * test['success_rate']:.1f}%" if test else "-")
-        print(f"| {obs} | {enc} | {p_bc}% | {ours[0]} | {p_rl}% | {ours[1]} |")
+            data = json.loads(f.read_text()) if f.exists() else {}
+            for key in ("test_rollout", "test"):
+                test = data.get(key)
+                ours.append(f"{100 * test['success_rate']:.1f}%" if test else "-")
+        print(f"| {obs} | {enc} | {p_bc}% | **{ours[0]}** | {ours[1]} | {p_rl}% | **{ours[2]}** | {ours[3]} |")
 
 
 def main() -> int:
@@ -245,6 +252,12 @@ def main() -> int:
         for cell in args.cells:
             done = out / f"{cell.replace(':', '_')}_{args.method}.json"
             if not args.redo and done.exists() and "test" in json.loads(done.read_text()):
+                record = json.loads(done.read_text())
+                best = Path(args.runs) / f"{cell.replace(':', '_')}_{args.method}" / "best.pt"
+                if "test_rollout" not in record and best.exists():  # a cell run before the paper's protocol was added
+                    record["test_rollout"] = test_eval(best, args.test_episodes, best.parent / "test_rollout.json", greedy=False)
+                    done.write_text(json.dumps(record, indent=1))
+                    print(f"{cell} {args.method}: plain rollout on the test problems {record['test_rollout']['success_rate']:.3f}", file=sys.stderr)
                 print(f"{cell} {args.method}: done already ({done}; --redo to run it again)", file=sys.stderr)
                 continue
             t0 = time.perf_counter()

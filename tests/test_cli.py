@@ -363,3 +363,19 @@ def test_bc_options_come_from_the_config_dataclasses(tmp_path: Path, monkeypatch
     with pytest.raises(SystemExit):
         main(["bc", "--epochs", "0"])
     assert "argument --epochs" in capsys.readouterr().err
+
+
+def test_eval_without_the_greedy_goal_test(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--no-greedy-goal``: the shipped policy rolls out to the goal tolerance, so its paths
+    take more steps than with the early stop where the straight edge to the goal is free;
+    other planners refuse the flag."""
+    steps = {}
+    for flag in ([], ["--no-greedy-goal"]):
+        out = tmp_path / f"m{len(flag)}.json"
+        assert main(["eval", "--planner", "policy", "--episodes", "20", "--json", str(out), "--quiet", *flag]) == 0
+        m = json.loads(out.read_text())
+        assert m["success_rate"] >= 0.9
+        steps[bool(flag)] = m["nodes_mean_solved"]
+    assert steps[True] > steps[False] + 2  # (measured on 50 problems: 11.9 against 6.9)
+    assert main(["eval", "--planner", "birrt", "--episodes", "2", "--no-greedy-goal", "--quiet"]) == 2
+    assert "--no-greedy-goal" in capsys.readouterr().err

@@ -118,6 +118,8 @@ LSAMPLE_PLANNERS = ("learned-sampling", "lsample-0.5", "lsample-0.9")
 def _check_checkpoint(args: argparse.Namespace, names: Sequence[str]) -> None:
     """--checkpoint needs a planner that runs a policy, an MPNet or a learned sampler (one
     kind only: one file cannot be two)."""
+    if getattr(args, "no_greedy_goal", False) and "policy" not in [n.lower() for n in names]:
+        raise CLIError(f"--no-greedy-goal is for --planner policy, not {', '.join(names)}")
     if not getattr(args, "checkpoint", None):
         return
     kinds = [
@@ -160,6 +162,9 @@ def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
         kwargs = {"max_nodes": args.max_nodes, "seed": seed, "checkpoint": getattr(args, "checkpoint", None)}
     elif name in ("policy", "hybrid"):
         kwargs = {"checkpoint": getattr(args, "checkpoint", None), "observation": getattr(args, "observation", None)}
+        if getattr(args, "no_greedy_goal", False):
+            if name == "policy":
+                kwargs["greedy_goal"] = False
         if name == "hybrid":
             kwargs.update(max_nodes=args.max_nodes, seed=seed)
     elif name in MPNET_PLANNERS:
@@ -208,6 +213,11 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     )
     p.add_argument("--time-limit", type=float, help="seconds per problem for ompl:NAME planners (default: 1)")
     p.add_argument("--range", type=float, help="longest edge of ompl:NAME planners that have one (default: 0.07, Bi-RRT's step)")
+    p.add_argument(
+        "--no-greedy-goal",
+        action="store_true",
+        help="--planner policy: roll the policy out until it is within the goal tolerance, without stopping early where the straight edge to the goal is certified free (the paper's protocol; the default stops there)",
+    )
     p.add_argument("--seed", type=non_negative_int, default=0, help="problem-set seed, 0 or more (default: %(default)s)")
 
 
