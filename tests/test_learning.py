@@ -492,3 +492,51 @@ def test_training_with_demonstrations_in_the_batches(tmp_path: Path) -> None:
     assert all(np.min(np.abs(expert - q).sum(-1)) < 1e-12 for q in tail)
     with pytest.raises(ValueError, match="demo_share"):
         train(replace(cfg, demo_share=1.0), tmp_path / "c", progress=False)
+
+
+def test_q_normalisation_makes_the_actor_update_independent_of_the_value_scale() -> None:
+    """``bc_q_normalise``: with the SAC term divided by mean |Q|, critics that rate actions
+    the same way at scales 1 and 100 move the actor identically (temperature ~0); without
+    it they do not."""
+    from dataclasses import replace
+
+    from pointplan.learning.sac import SAC, DemoBatch, SACConfig
+
+    own = replace(SMALL, shared_encoder=False, critic_action="points")
+    rng = np.random.default_rng(2)
+    env = PlanningEnv("narrow2d")
+    buf = EpisodeReplay(500, (64, 4), 2, 2)
+    _collect(env, buf, 2, rng)
+    batch = buf.sample(32, np.random.default_rng(3))
+    demo = DemoBatch(
+        torch.as_tensor(rng.normal(size=(32, 64, 4)), dtype=torch.float32),
+        torch.as_tensor(rng.normal(size=(32, 2)), dtype=torch.float32),
+        torch.full((32, 2), 0.5),
+    )
+
+    class Scaled(torch.nn.Module):
+        def __init__(self, c: float) -> None:
+            super().__init__()
+            self.c = c
+            self.shared = None  # (no encoder shared with the actor)
+            self.w = torch.nn.Parameter(torch.zeros(1))  # (an optimiser needs a parameter)
+
+        def forward(self, obs, goal, action, features=None):  # type: ignore[no-untyped-def]
+            q = -self.c * (1.0 + ((action - 0.3) ** 2).sum(-1)) + 0 * self.w
+            return q, q
+
+    def actor_after(c: float, normalise: bool) -> list[torch.Tensor]:
+        torch.manual_seed(0)
+        sac = SAC(Disc2D(), EnvConfig(), (64, 4), own, SACConfig(batch_size=32, bc_weight=1.0, bc_q_normalise=normalise, init_alpha=1e-12))
+        sac.critic = Scaled(c)
+        sac.critic_target = Scaled(c)
+        sac.critic_opt = torch.optim.Adam(sac.critic.parameters(), lr=1e-3)
+        torch.manual_seed(1)
+        sac.update(batch, demo)
+        return [p.detach().clone() for p in sac.actor.parameters()]
+
+    def same(a: list[torch.Tensor], b: list[torch.Tensor]) -> bool:
+        return all(torch.allclose(x, y, atol=1e-6) for x, y in zip(a, b))
+
+    assert same(actor_after(1.0, True), actor_after(100.0, True))
+    assert not same(actor_after(1.0, False), actor_after(100.0, False))

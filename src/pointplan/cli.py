@@ -505,6 +505,7 @@ TRAIN_OPTIONS = {
     "demo-share": "demo_share",
     "bc-weight": "sac.bc_weight",
     "bc-q-filter": "sac.bc_q_filter",
+    "bc-q-normalise": "sac.bc_q_normalise",
     "lr": "sac.lr",
     "batch-size": "sac.batch_size",
     "gamma": "sac.gamma",

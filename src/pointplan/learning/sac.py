@@ -67,6 +67,9 @@ class SACConfig:
     #: apply the cloning term only where the critics rate the expert's action above the
     #: actor's (Nair et al.'s Q-filter)
     bc_q_filter: bool = False
+    #: divide the actor's SAC term by the batch's mean |Q| (detached), so that the cloning
+    #: term's weight does not depend on the scale of the values (as TD3+BC does)
+    bc_q_normalise: bool = False
 
 
 def batch_rewards(robot: Robot, env: EnvConfig, b: Batch) -> tuple[np.ndarray, np.ndarray]:
@@ -167,7 +170,10 @@ class SAC:
         self.critic.requires_grad_(False)
         a_pi, logp = self.actor.sample(obs, g, h_pi)
         q1p, q2p = self.critic(obs, g, a_pi, h_pi)
-        actor_loss = (alpha * logp - torch.min(q1p, q2p)).mean()
+        q_pi = torch.min(q1p, q2p)
+        actor_loss = (alpha * logp - q_pi).mean()
+        if self.cfg.bc_q_normalise:
+            actor_loss = actor_loss / q_pi.detach().abs().mean().clamp_min(1e-6)
         extra: dict[str, float] = {}
         if demo is not None and self.cfg.bc_weight > 0:
             bc = self._cloning_loss(demo)
