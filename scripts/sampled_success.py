@@ -5,6 +5,10 @@ never fitted can solve many problems with its mean action and few with its sampl
 measures both on the validation problems (seeded):
 
     python scripts/sampled_success.py runs/bc_sshape_spread/bc.pt --episodes 200
+    python scripts/sampled_success.py runs/bc_sshape_spread/bc.pt --scales 0 0.25 0.5 1
+
+``--scales`` samples ``tanh(mean + s * std * noise)`` for each ``s`` (0 is the mean action,
+1 the policy's own spread).
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=200)
     ap.add_argument("--split", default="val", choices=["train", "val"])
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--scales", type=float, nargs="*", default=[0.0, 1.0], help="noise scales to try (0: the mean action)")
     args = ap.parse_args()
     torch.set_num_threads(1)
     from pointplan.envs.core import EnvConfig
@@ -35,19 +40,22 @@ def main() -> None:
     env = EnvConfig(observation=policy.observation, n_points=policy.n_points, split=args.split)
     problems = scenario.problems(args.split, args.episodes, seed=args.seed)
     actor = policy.actor
-    for mode in ("mean", "sampled"):
+    if any(s < 0 for s in args.scales):
+        ap.error("--scales must be >= 0")
+    for scale in args.scales:
         torch.manual_seed(args.seed)
 
-        def act(o: np.ndarray, q: np.ndarray, g: np.ndarray, mode: str = mode) -> np.ndarray:
+        def act(o: np.ndarray, q: np.ndarray, g: np.ndarray, scale: float = scale) -> np.ndarray:
             with torch.no_grad():
                 obs = torch.as_tensor(obs_input(robot, o), dtype=torch.float32)
                 goal = torch.as_tensor(goal_input(robot, q, g), dtype=torch.float32)
-                a = actor.act(obs, goal) if mode == "mean" else actor.sample(obs, goal)[0]
-                return a.numpy()
+                mean, log_std = actor(obs, goal)
+                return torch.tanh(mean + scale * log_std.exp() * torch.randn_like(mean)).numpy()
 
         res = rollout_batch(act, robot, env, problems, scenario.horizon, seed=args.seed)
         ok = np.array([r.success for r in res])
-        print(f"{mode:8s} {100 * ok.mean():5.1f}% of {len(ok)} {args.split} problems")
+        name = "mean" if scale == 0 else f"noise x{scale:g}"
+        print(f"{name:12s} {100 * ok.mean():5.1f}% of {len(ok)} {args.split} problems", flush=True)
 
 
 if __name__ == "__main__":
