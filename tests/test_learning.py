@@ -540,3 +540,33 @@ def test_q_normalisation_makes_the_actor_update_independent_of_the_value_scale()
 
     assert same(actor_after(1.0, True), actor_after(100.0, True))
     assert not same(actor_after(1.0, False), actor_after(100.0, False))
+
+
+def test_expert_attempts_keep_the_shortest_solution() -> None:
+    """``attempts``: each demonstration is the shortest of that many Bi-RRT solutions,
+    planned here again independently with the same seeds; the first attempt is the
+    single-attempt run's, so no demonstration gets longer and some get shorter."""
+    from pointplan.learning.bc import _ATTEMPT_SEED_STRIDE, _demo_index
+    from pointplan.planners.base import path_length
+    from pointplan.planners.birrt import BiRRT
+
+    scenario = Narrow2DScenario()
+    robot = scenario.robot
+    one = dict(generate_demos(scenario, 12, seed=0, progress=False).paths)
+    three = dict(generate_demos(scenario, 12, seed=0, progress=False, attempts=3).paths)
+    assert one.keys() == three.keys() and len(one) == 12
+    shorter = 0
+    for i in range(12):
+        k = _demo_index(0, 12, i)
+        p = scenario.problem("train", k, seed=0)
+        lengths = []
+        for a in range(3):
+            res = BiRRT(robot, max_nodes=20000, seed=k + a * _ATTEMPT_SEED_STRIDE).plan(p)
+            if res.success:
+                lengths.append(path_length(robot, res.path))
+        assert path_length(robot, three[k]) == pytest.approx(min(lengths), abs=1e-9)
+        assert path_length(robot, one[k]) == pytest.approx(lengths[0], abs=1e-9)
+        shorter += path_length(robot, three[k]) < path_length(robot, one[k]) - 1e-6
+    assert shorter >= 3
+    with pytest.raises(ValueError, match="attempts"):
+        generate_demos(scenario, 2, seed=0, progress=False, attempts=0)

@@ -582,6 +582,7 @@ BC_OPTIONS = {
     "epochs-per-round": "epochs_per_round",
     "eval-episodes": "eval_episodes",
     "expert-max-nodes": "max_nodes",
+    "expert-attempts": "bc.expert_attempts",
 }
 
 

@@ -55,8 +55,11 @@ def resample_path(robot: Robot, path: np.ndarray) -> np.ndarray:
 
 
 #: one demonstration to plan: (env, robot, split, problem index, problem seed, planner
-#: seed, max nodes, start or None for the problem's own)
-DemoJob = tuple[str, "str | None", str, int, int, int, int, "np.ndarray | None"]
+#: seed, max nodes, start or None for the problem's own, Bi-RRT attempts)
+DemoJob = tuple[str, "str | None", str, int, int, int, int, "np.ndarray | None", int]
+
+#: planner seeds of a job's attempts after its first are this far apart
+_ATTEMPT_SEED_STRIDE = 1_000_003
 
 
 def _demo_index(seed: int, n_problems: int, i: int) -> int:
@@ -66,17 +69,23 @@ def _demo_index(seed: int, n_problems: int, i: int) -> int:
 
 def _plan_demo(job: DemoJob) -> tuple[int, np.ndarray | None]:
     """Solve one training problem with Bi-RRT (from ``start`` if given) and cut its path into
-    policy steps. Runs in worker processes: the problem is rebuilt from its index, so only
-    indices and arrays travel."""
+    policy steps. With several attempts, Bi-RRT plans the problem that many times (planner
+    seeds ``_ATTEMPT_SEED_STRIDE`` apart) and the shortest solution is kept. Runs in worker
+    processes: the problem is rebuilt from its index, so only indices and arrays travel."""
+    from ..planners.base import path_length
     from ..planners.birrt import BiRRT
 
-    env, robot_name, split, index, seed, planner_seed, max_nodes, start = job
+    env, robot_name, split, index, seed, planner_seed, max_nodes, start, attempts = job
     scenario = make_scenario(env, robot=robot_name)
     p = scenario.problem(split, index, seed=seed)
     if start is not None:
         p = Problem(p.scene, start, p.goal, p.tag)
-    res = BiRRT(scenario.robot, max_nodes=max_nodes, seed=planner_seed).plan(p)
-    return index, (resample_path(scenario.robot, res.path) if res.success else None)
+    best, best_len = None, float("inf")
+    for a in range(max(1, attempts)):
+        res = BiRRT(scenario.robot, max_nodes=max_nodes, seed=planner_seed + a * _ATTEMPT_SEED_STRIDE).plan(p)
+        if res.success and (length := path_length(scenario.robot, res.path)) < best_len:
+            best, best_len = res.path, length
+    return index, (resample_path(scenario.robot, best) if best is not None else None)
 
 
 def _single_thread() -> None:
@@ -146,12 +155,17 @@ def generate_demos(
     split: str = "train",
     workers: int = 1,
     address: str | None = None,
+    attempts: int = 1,
 ) -> Demos:
     """Plan ``n_problems`` training problems with Bi-RRT and cut the paths into steps
-    (``workers`` Ray workers or processes, see :func:`demo_pool`)."""
+    (``workers`` Ray workers or processes, see :func:`demo_pool`); with ``attempts > 1``
+    each problem is planned that many times and its shortest solution kept (the first
+    attempt is the single-attempt run's, so its problems and solutions are a subset)."""
+    if attempts < 1:
+        raise ValueError(f"attempts must be >= 1, not {attempts}")
     robot_name = scenario.robot.name if scenario.robot.dim == 3 else None
     index = [_demo_index(seed, n_problems, i) for i in range(n_problems)]
-    jobs: list[DemoJob] = [(scenario.name, robot_name, split, k, seed, seed * 7_919 + k, max_nodes, None) for k in index]
+    jobs: list[DemoJob] = [(scenario.name, robot_name, split, k, seed, seed * 7_919 + k, max_nodes, None, attempts) for k in index]
     pool = demo_pool(workers, address)
     try:
         paths = plan_demos(jobs, pool, progress)
@@ -304,6 +318,10 @@ class BCConfig:
     address: str | None = None
     #: a file of demonstrations: loaded if it exists, written after planning otherwise
     demos_file: str | None = None
+    #: Bi-RRT runs per demonstration problem; the shortest solution is kept (shorter,
+    #: more consistent demonstrations: an expert that picks the shorter way round an
+    #: obstacle, rather than either way at random, is easier to clone)
+    expert_attempts: int = field(default=1, metadata={"min": 1})
 
 
 def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: Demos | None = None) -> dict[str, Any]:
@@ -319,7 +337,7 @@ def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: D
     if demos is None and cfg.demos_file and Path(cfg.demos_file).exists():
         demos = load_demos(cfg.demos_file, scenario)
     if demos is None:
-        demos = generate_demos(scenario, cfg.n_problems, cfg.seed, progress=progress, workers=cfg.workers, address=cfg.address)
+        demos = generate_demos(scenario, cfg.n_problems, cfg.seed, progress=progress, workers=cfg.workers, address=cfg.address, attempts=cfg.expert_attempts)
         if cfg.demos_file:
             save_demos(cfg.demos_file, scenario, demos, "train", cfg.seed)
     t_demos = time.perf_counter() - t0
