@@ -55,7 +55,9 @@ def main() -> None:
         res = rollout_batch(act, robot, env, problems, scenario.horizon, seed=args.seed)
         ok = np.array([r.success for r in res])
         name = "mean" if scale == 0 else f"noise x{scale:g}"
-        print(f"{name:12s} {100 * ok.mean():5.1f}% of {len(ok)} {args.split} problems", flush=True)
+        # a failure "stalls" when its last 20 steps moved it less than one step (0.07)
+        stalled = sum(not r.success and len(r.path) > 20 and float(robot.distance(r.path[-21], r.path[-1])) < 0.07 for r in res)
+        print(f"{name:12s} {100 * ok.mean():5.1f}% of {len(ok)} {args.split} problems; {stalled} of {int((~ok).sum())} failures stalled", flush=True)
 
 
 if __name__ == "__main__":
