@@ -379,3 +379,36 @@ def test_eval_without_the_greedy_goal_test(tmp_path: Path, capsys: pytest.Captur
     assert steps[True] > steps[False] + 2  # (measured on 50 problems: 11.9 against 6.9)
     assert main(["eval", "--planner", "birrt", "--episodes", "2", "--no-greedy-goal", "--quiet"]) == 2
     assert "--no-greedy-goal" in capsys.readouterr().err
+
+
+def test_eval_attempts_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--attempts`` reaches the policy planner; other planners and bad noise are refused."""
+    out = tmp_path / "m.json"
+    assert main(["eval", "--planner", "policy", "--episodes", "10", "--attempts", "3", "--json", str(out), "--quiet"]) == 0
+    assert json.loads(out.read_text())["success_rate"] >= 0.9
+    assert main(["eval", "--planner", "birrt", "--episodes", "2", "--attempts", "2", "--quiet"]) == 2
+    assert "--attempts" in capsys.readouterr().err
+    assert main(["eval", "--planner", "policy", "--episodes", "2", "--attempts", "2", "--action-noise", "-1", "--quiet"]) == 2
+    assert "--action-noise" in capsys.readouterr().err
+    assert (
+        main(
+            [
+                "eval",
+                "--env",
+                "dynamic3d",
+                "--robot",
+                "sphere3d",
+                "--observation",
+                "local",
+                "--planner",
+                "policy",
+                "--episodes",
+                "2",
+                "--attempts",
+                "2",
+                "--quiet",
+            ]
+        )
+        == 2
+    )
+    assert "static scenes" in capsys.readouterr().err

@@ -177,3 +177,100 @@ def test_one_robot_rollout_in_3d_matches_the_batched_one(robot_name: str) -> Non
         b = rollout_batch(policy, robot, planner.env, [p], planner.horizon)[0]
         assert a.nodes == b.nodes and a.success == b.success
         np.testing.assert_allclose(a.path[: len(b.path)], b.path, atol=1e-5)
+
+
+def test_numpy_actor_samples_like_torch() -> None:
+    """The numpy network's sampled action is the PyTorch actor's tanh(mean + std * noise)."""
+    policy = Policy.from_checkpoint(shipped_checkpoint("disc2d"))
+    fast = NumpyPointNetActor.from_actor(policy.actor)
+    assert fast is not None
+    rng = np.random.default_rng(1)
+    obs = rng.normal(size=(4, 64, 4)).astype(np.float32)
+    goal = rng.normal(size=(4, 2)).astype(np.float32)
+    noise = rng.normal(size=(4, 2)).astype(np.float32)
+    with torch.no_grad():
+        mean, log_std = policy.actor(torch.as_tensor(obs), torch.as_tensor(goal))
+        ref = torch.tanh(mean + log_std.exp() * torch.as_tensor(noise)).numpy()
+    np.testing.assert_allclose(fast(obs, goal, noise), ref, atol=2e-6)
+    np.testing.assert_allclose(policy(obs, np.zeros((4, 2)), np.zeros((4, 2)), noise=noise).shape, (4, 2))
+    assert not np.allclose(fast(obs, goal, noise), fast(obs, goal), atol=1e-3)  # the noise is applied
+    np.testing.assert_allclose(fast(obs, goal, np.zeros((4, 2), np.float32)), fast(obs, goal), atol=1e-7)
+
+
+def _weak_sphere_policy(horizon: int = 15):  # type: ignore[no-untyped-def]
+    """An untrained PointNet policy for the sphere with a short horizon: its mean action
+    fails most problems, so retries have work to do."""
+    from pointplan.models.actor_critic import Actor, NetConfig
+    from pointplan.models.encoders import EncoderConfig
+    from pointplan.scenes.scenarios import make_scenario
+
+    scenario = make_scenario("boxes3d", robot="sphere3d")
+    robot = scenario.robot
+    torch.manual_seed(1)
+    actor = Actor((64, 6), robot.twist_dim, robot.twist_dim, NetConfig(EncoderConfig("pointnet", 32, 2), head_width=32, head_layers=2))
+    with torch.no_grad():  # a wide spread, so that sampled attempts go places
+        actor.head[-1].bias[robot.twist_dim :] = 0.0
+    policy = Policy(actor, robot, {"observation": "global", "n_points": 64, "horizon": horizon})
+    return scenario, policy
+
+
+def test_attempts_retry_failures_with_sampled_actions() -> None:
+    from pointplan.planners.policy import PolicyPlanner
+
+    scenario, policy = _weak_sphere_policy()
+    robot = scenario.robot
+    problems = scenario.problems("val", 12, seed=0)
+    plain = PolicyPlanner(policy)
+    retry = PolicyPlanner(policy, attempts=4)
+    for p in problems:
+        a, b = plain.plan(p), retry.plan(p)
+        if a.success:  # a success of the mean action is returned as it is
+            assert b.success and b.nodes == a.nodes and np.array_equal(a.path, b.path)
+            assert "attempts" not in b.info
+            continue
+        runs = b.info["attempts"]
+        steps = b.info["attempt_steps"]
+        assert 2 <= runs <= 4 and len(steps) == runs
+        assert steps[0] == a.nodes  # the first attempt is the mean-action rollout
+        assert b.nodes == sum(steps) and b.collision_checks >= a.collision_checks
+        assert runs == 4 or b.success  # it stops at the first success only
+        # the returned path is an attempt's own path, checked independently by the evaluator
+        assert bool(check_path(robot, p, b.path)) == b.success
+        assert b.path.shape[0] >= 2 and np.array_equal(b.path[0], p.start)
+    # seeded by (seed, attempt, problem): any order gives the same attempts
+    fwd = [retry.plan(p) for p in problems[:4]]
+    back = [retry.plan(p) for p in reversed(problems[:4])][::-1]
+    for x, y in zip(fwd, back):
+        assert x.nodes == y.nodes and np.array_equal(x.path, y.path)
+    # another seed draws other actions
+    other = PolicyPlanner(policy, attempts=4, seed=5)
+    failing = [p for p in problems if not plain.plan(p).success]
+    assert failing
+    assert any(not np.array_equal(retry.plan(p).path, other.plan(p).path) for p in failing)
+
+
+def test_attempts_raise_success_and_are_counted_by_the_evaluator() -> None:
+    from pointplan.planners.policy import PolicyPlanner
+
+    scenario, policy = _weak_sphere_policy(horizon=25)
+    problems = scenario.problems("val", 30, seed=1)
+    one = evaluate(PolicyPlanner(policy), problems, scenario.robot, progress=False).metrics()
+    six = evaluate(PolicyPlanner(policy, attempts=6), problems, scenario.robot, progress=False).metrics()
+    assert six["success_rate"] >= one["success_rate"]
+    assert six["success_rate"] > one["success_rate"] or one["success_rate"] == 1.0
+    assert six["nodes_mean"] > one["nodes_mean"]  # failed attempts' steps are counted
+    assert six["planner_claims_disagree"] == 0
+
+
+def test_attempts_bad_input() -> None:
+    from pointplan.planners.policy import PolicyPlanner
+    from pointplan.scenes.scenarios import make_scenario
+
+    _, policy = _weak_sphere_policy()
+    with pytest.raises(ValueError, match="attempts"):
+        PolicyPlanner(policy, attempts=0)
+    with pytest.raises(ValueError, match="action_noise"):
+        PolicyPlanner(policy, action_noise=-1.0)
+    dyn = make_scenario("dynamic3d", robot="sphere3d").problem("val", 0, seed=0)
+    with pytest.raises(ValueError, match="static scenes"):
+        PolicyPlanner(policy, attempts=2).plan(dyn)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import sys
 import time
 from collections.abc import Sequence
@@ -120,6 +121,11 @@ def _check_checkpoint(args: argparse.Namespace, names: Sequence[str]) -> None:
     kind only: one file cannot be two)."""
     if getattr(args, "no_greedy_goal", False) and "policy" not in [n.lower() for n in names]:
         raise CLIError(f"--no-greedy-goal is for --planner policy, not {', '.join(names)}")
+    if getattr(args, "attempts", 1) > 1 and not any(n.lower() in POLICY_PLANNERS for n in names):
+        raise CLIError(f"--attempts is for --planner policy or hybrid, not {', '.join(names)}")
+    noise = getattr(args, "action_noise", 1.0)
+    if not (math.isfinite(noise) and noise >= 0):
+        raise CLIError(f"--action-noise must be a finite number >= 0, not {noise}")
     if not getattr(args, "checkpoint", None):
         return
     kinds = [
@@ -165,6 +171,8 @@ def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
         if getattr(args, "no_greedy_goal", False):
             if name == "policy":
                 kwargs["greedy_goal"] = False
+        if getattr(args, "attempts", 1) > 1:
+            kwargs.update(attempts=args.attempts, action_noise=args.action_noise)
         if name == "hybrid":
             kwargs.update(max_nodes=args.max_nodes, seed=seed)
     elif name in MPNET_PLANNERS:
@@ -217,6 +225,18 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
         "--no-greedy-goal",
         action="store_true",
         help="--planner policy: roll the policy out until it is within the goal tolerance, without stopping early where the straight edge to the goal is certified free (the paper's protocol; the default stops there)",
+    )
+    p.add_argument(
+        "--attempts",
+        type=positive_int,
+        default=1,
+        help="--planner policy or hybrid: when the policy's mean-action rollout fails, try again from the start up to this many times in all with sampled actions; steps, checks and time of every attempt are counted (default: %(default)s, the plain policy)",
+    )
+    p.add_argument(
+        "--action-noise",
+        type=float,
+        default=1.0,
+        help="the spread of the sampled attempts of --attempts, as a multiple of the policy's own (default: %(default)s)",
     )
     p.add_argument("--seed", type=non_negative_int, default=0, help="problem-set seed, 0 or more (default: %(default)s)")
 

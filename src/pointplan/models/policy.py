@@ -14,7 +14,7 @@ import torch
 from ..config import from_dict
 from ..robots import make_robot
 from ..robots.base import Robot
-from .actor_critic import Actor, NetConfig
+from .actor_critic import LOG_STD_MAX, LOG_STD_MIN, Actor, NetConfig
 from .checkpoint import check_compatible, load_checkpoint
 from .inputs import goal_input, obs_input
 
@@ -55,12 +55,18 @@ class Policy:
         """Raise a clear error if the env differs from the one the policy was trained on."""
         check_compatible(self.meta, robot.name, observation, obs_shape, where="policy checkpoint")
 
-    def __call__(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """Actions ``(E, k)`` in [-1, 1] for observations ``(E, ...)``, configurations and goals."""
+    def __call__(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray, noise: np.ndarray | None = None) -> np.ndarray:
+        """Actions ``(E, k)`` in [-1, 1] for observations ``(E, ...)``, configurations and
+        goals: the mean action ``tanh(mean)``, or with ``noise`` (``(E, k)`` standard
+        normal draws, possibly scaled) the sampled one ``tanh(mean + std * noise)``."""
         with torch.inference_mode():
             o = torch.as_tensor(obs_input(self.robot, obs), device=self.device)
             g = torch.as_tensor(goal_input(self.robot, q, goal), device=self.device)
-            return self.actor.act(o, g).cpu().numpy()
+            if noise is None:
+                return self.actor.act(o, g).cpu().numpy()
+            mean, log_std = self.actor(o, g)
+            eps = torch.as_tensor(np.asarray(noise, np.float32), device=self.device)
+            return torch.tanh(mean + log_std.exp() * eps).cpu().numpy()
 
     def fast_actor(self) -> NumpyPointNetActor | None:
         """The actor as numpy arrays (a snapshot of the current weights) when it is a
@@ -121,17 +127,19 @@ class NumpyPointNetActor:
             return None
         return cls(wb(enc.inp), [wb(m) for m in hidden], [wb(m) for m in linears], actor.action_dim)
 
-    def __call__(self, obs_in: np.ndarray, goal_in: np.ndarray) -> np.ndarray:
+    def __call__(self, obs_in: np.ndarray, goal_in: np.ndarray, noise: np.ndarray | None = None) -> np.ndarray:
         w, b = self.inp
         h = obs_in @ w
         h += b
-        return self.from_first_layer(h, goal_in)
+        return self.from_first_layer(h, goal_in, noise)
 
-    def from_first_layer(self, h: np.ndarray, goal_in: np.ndarray) -> np.ndarray:
+    def from_first_layer(self, h: np.ndarray, goal_in: np.ndarray, noise: np.ndarray | None = None) -> np.ndarray:
         """The action from the first layer's pre-activations ``obs_in @ W + b``
         (``(..., N, width)`` float32, overwritten): a caller that can get them cheaper
         (a translating robot: a table per scene minus one row per step) skips the input
-        layer."""
+        layer. With ``noise`` (standard normal draws, possibly scaled, one per action
+        component) the sampled action ``tanh(mean + std * noise)`` instead of
+        ``tanh(mean)``."""
         h = _elu(h)
         last = len(self.hidden) - 1
         pooled = None
@@ -152,7 +160,11 @@ class NumpyPointNetActor:
             z += b
             if i < len(self.head) - 1:
                 z = _elu(z)
-        return np.tanh(z[..., : self.action_dim])
+        mean = z[..., : self.action_dim]
+        if noise is None:
+            return np.tanh(mean)
+        log_std = np.clip(z[..., self.action_dim :], LOG_STD_MIN, LOG_STD_MAX)
+        return np.tanh(mean + np.exp(log_std) * np.asarray(noise, np.float32))
 
 
 #: trained policies that ship inside the package: (robot, observation) -> file in

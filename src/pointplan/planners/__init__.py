@@ -43,14 +43,25 @@ def _hybrid_factory(
     seed: int = 0,
     stall_steps: int | None = 10,
     stall_distance: float = 0.035,
+    attempts: int = 1,
+    action_noise: float = 1.0,
     **kw: Any,
 ) -> Planner:
     """The policy (``checkpoint`` or the shipped one), stopped when it stalls (moved less
     than ``stall_distance`` over ``stall_steps`` steps) or at its horizon, then Bi-RRT
-    (``max_nodes``, ``seed``, other keywords) from its configuration closest to the goal."""
+    (``max_nodes``, ``seed``, other keywords) from its configuration closest to the goal.
+    ``attempts``, ``action_noise``: the policy's sampled retries (:class:`PolicyPlanner`)."""
     from .hybrid import HybridPlanner
 
-    policy = _policy_factory(robot, checkpoint=checkpoint, observation=observation, stall_steps=stall_steps, stall_distance=stall_distance)
+    policy = _policy_factory(
+        robot,
+        checkpoint=checkpoint,
+        observation=observation,
+        stall_steps=stall_steps,
+        stall_distance=stall_distance,
+        attempts=attempts,
+        action_noise=action_noise,
+    )
     return HybridPlanner(policy, BiRRT(robot, max_nodes=max_nodes, seed=seed, **kw))  # type: ignore[arg-type]
 
 

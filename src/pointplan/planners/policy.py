@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+import zlib
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -256,6 +257,15 @@ class PolicyPlanner:
     each step is the mean of the actions for ``draws`` independent random point subsets
     (``draws`` network passes per step; 1, the default, is the plain policy).
 
+    ``attempts``: when the mean-action rollout fails, roll out again from the start up to
+    ``attempts - 1`` more times with sampled actions ``tanh(mean + action_noise * std *
+    noise)`` (the policy's own spread at ``action_noise = 1``), and return the first
+    success. The steps, motion checks and time of all attempts are counted in the result
+    (``info["attempts"]``: how many ran); a failure returns the attempt that ended
+    closest to the goal. The draws are seeded by ``seed``, the attempt and the problem's
+    start and goal, so a problem gets the same attempts in any order. Static scenes only
+    (a rollout in a moving scene cannot start over).
+
     A PointNet actor is copied to numpy when the planner is made (later changes to the
     policy's weights are not seen; make a new planner). Scenes with moving obstacles and
     image observations go through ``rollout_batch`` (PyTorch on one thread), which runs to
@@ -278,6 +288,8 @@ class PolicyPlanner:
         draws: int = 1,
         greedy_goal: bool = True,
         compiled: bool = True,
+        attempts: int = 1,
+        action_noise: float = 1.0,
     ) -> None:
         from ..models.policy import Policy
 
@@ -300,6 +312,14 @@ class PolicyPlanner:
         self.draws = max(1, int(draws))
         self.greedy_goal = bool(greedy_goal)
         self.compiled = bool(compiled)
+        if int(attempts) < 1:
+            raise ValueError(f"attempts must be >= 1, not {attempts}")
+        if not np.isfinite(action_noise) or action_noise < 0:
+            raise ValueError(f"action_noise must be a finite number >= 0, not {action_noise}")
+        self.attempts = int(attempts)
+        self.action_noise = float(action_noise)
+        #: the action noise of the attempt being rolled out (None: the mean action)
+        self._noise_rng: np.random.Generator | None = None
         #: the network as numpy arrays (weights as of now), or None: PyTorch on one thread
         self.fast = policy.fast_actor()
         self._net: tuple[Any, ...] | None = self._kernel_weights() if self.compiled else None
@@ -318,6 +338,53 @@ class PolicyPlanner:
         self._stream = np.empty(0)
 
     def plan(self, problem: Problem) -> PlanResult:
+        if self.attempts > 1 and problem.scene.dynamic:
+            raise ValueError("attempts > 1 plans static scenes only: a rollout among moving obstacles cannot start over")
+        res = self._plan_mean(problem)
+        if res.success or self.attempts == 1:
+            return res
+        tried = [res]
+        try:
+            for k in range(1, self.attempts):
+                key = zlib.crc32(np.ascontiguousarray(problem.start, np.float64).tobytes() + np.ascontiguousarray(problem.goal, np.float64).tobytes())
+                self._noise_rng = np.random.default_rng(np.random.SeedSequence([self.seed, k, key]))
+                tried.append(self._plan_sampled(problem))
+                if tried[-1].success:
+                    break
+        finally:
+            self._noise_rng = None
+        last = tried[-1]
+        pick = last if last.success else min(tried, key=lambda r: float(self.robot.distance(r.path[-1], problem.goal)))
+        out = PlanResult(
+            path=pick.path,
+            success=pick.success,
+            nodes=sum(r.nodes for r in tried),
+            collision_checks=sum(r.collision_checks for r in tried),
+            time_s=sum(r.time_s for r in tried),
+        )
+        out.info.update(pick.info)
+        out.info["attempts"] = len(tried)
+        out.info["attempt_steps"] = [int(r.nodes) for r in tried]
+        return out
+
+    def _plan_sampled(self, problem: Problem) -> PlanResult:
+        """One rollout with sampled actions (``self._noise_rng`` set)."""
+        if self._observer is None:
+            self._make_observer()
+        if isinstance(self._observer, PointSetObserver) and type(self._observer).observe is PointSetObserver.observe:
+            return self._rollout_one(problem)
+        rng = self._noise_rng
+        assert rng is not None
+        dim = self.policy.actor.action_dim
+
+        def act(obs: np.ndarray, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
+            return self.policy(obs, q, goal, noise=self.action_noise * rng.standard_normal((len(q), dim)))
+
+        with torch_threads(1):
+            return rollout_batch(act, self.robot, self.env, [problem], self.horizon, self.seed, connect_goal=self.connect_goal)[0]
+
+    def _plan_mean(self, problem: Problem) -> PlanResult:
+        """The mean-action rollout."""
         if problem.scene.dynamic:
             if self.observer_wrapper is not None or self.draws > 1:
                 raise ValueError("observer_wrapper and draws > 1 plan static scenes only")
@@ -360,9 +427,12 @@ class PolicyPlanner:
     def _act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
         from ..models.inputs import goal_input, obs_input
 
+        noise = None
+        if self._noise_rng is not None:
+            noise = self.action_noise * self._noise_rng.standard_normal(self.policy.actor.action_dim)
         if self.fast is not None:
-            return self.fast(obs_input(self.robot, obs[None])[0], goal_input(self.robot, q, goal))
-        return self.policy(obs[None], q[None], goal[None])[0]
+            return self.fast(obs_input(self.robot, obs[None])[0], goal_input(self.robot, q, goal), noise)
+        return self.policy(obs[None], q[None], goal[None], None if noise is None else noise[None])[0]
 
     def _uniforms(self, k: int) -> np.ndarray:
         """The first ``k`` numbers of the stream ``rollout_batch`` draws its observations
@@ -402,7 +472,10 @@ class PolicyPlanner:
         building the observation. The body frame is a translation, so the input layer's
         pre-activations are a per-scene table (:meth:`_fold`) minus one row
         (``q / scale @ W``), gathered for the drawn points: the same arithmetic up to
-        float32 round-off (about 1e-7). ``None`` otherwise."""
+        float32 round-off (about 1e-7). ``None`` otherwise, and while actions are sampled
+        (an attempt after the first: they go through :meth:`_act`)."""
+        if self._noise_rng is not None:
+            return None
         fold = fold or self._fold()
         if fold is None:
             return None
@@ -682,7 +755,7 @@ class PolicyPlanner:
 
     def plan_many(self, problems: Sequence[Problem]) -> list[PlanResult]:
         """All problems at once (much faster than one by one; one by one with an
-        ``observer_wrapper`` or ``draws > 1``)."""
-        if self.observer_wrapper is not None or self.draws > 1:
+        ``observer_wrapper``, ``draws > 1`` or ``attempts > 1``)."""
+        if self.observer_wrapper is not None or self.draws > 1 or self.attempts > 1:
             return [self.plan(p) for p in problems]
         return rollout_batch(self.policy, self.robot, self.env, problems, self.horizon, self.seed, connect_goal=self.connect_goal)
