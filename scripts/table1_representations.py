@@ -176,7 +176,14 @@ def run_rl(cell: str, args: argparse.Namespace) -> dict:
         return {"curve": curve, "interrupted": True}
     test = test_eval(run_dir / "best.pt", args.test_episodes, run_dir / "test.json")
     rollout = test_eval(run_dir / "best.pt", args.test_episodes, run_dir / "test_rollout.json", greedy=False)
-    return {"curve": curve, "best_val": res.best_success, "test": test, "test_rollout": rollout}
+    # the curve's wall times add up over resumed sessions; the record's own ``wall_time_s`` is this process's
+    return {
+        "curve": curve,
+        "best_val": res.best_success,
+        "test": test,
+        "test_rollout": rollout,
+        "train_wall_time_s": curve[-1]["wall_time_s"] if curve else None,
+    }
 
 
 def plot(out_dir: Path, path: str) -> None:
@@ -187,12 +194,14 @@ def plot(out_dir: Path, path: str) -> None:
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for ax, method, xkey, xlabel in ((axes[0], "bc", "epochs", "epochs of behavioural cloning"), (axes[1], "rl", "env_steps", "environment steps (SAC + HER)")):
-        for cell in CELLS:
+        for k, cell in enumerate(CELLS):  # one colour per cell in both panels
             f = out_dir / f"{cell.replace(':', '_')}_{method}.json"
             if not f.exists():
                 continue
             curve = json.loads(f.read_text())["curve"]
-            ax.plot([c[xkey] for c in curve], [100 * c["val_success"] for c in curve], marker="o", ms=3, label=cell.replace(":", " / "))
+            if not curve:
+                continue
+            ax.plot([c[xkey] for c in curve], [100 * c["val_success"] for c in curve], marker="o", ms=3, color=f"C{k}", label=cell.replace(":", " / "))
         ax.set_xlabel(xlabel)
         ax.set_ylabel("validation success (%)")
         ax.set_ylim(0, 100)
