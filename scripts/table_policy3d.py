@@ -6,7 +6,10 @@ the test problems of every 3D scene, with the paper's success beside ours.
 
 Each cell is written to ``docs/data/policy3d/{robot}_{scene}_{planner}.json`` (the metrics
 of ``pointplan eval``); ``--table-only`` reads them back. Policies come from the package
-(``--checkpoint-global`` / ``--checkpoint-local`` evaluate other files).
+(``--checkpoint-global`` / ``--checkpoint-local`` evaluate other files). With
+``--attempts K`` the policy planners retry failed rollouts with sampled actions
+(``pointplan eval --attempts``); their cells are named ``policy-local-xK`` and skip the
+moving scene, where a rollout cannot start over.
 """
 
 from __future__ import annotations
@@ -47,7 +50,11 @@ def run(args: argparse.Namespace) -> None:
                 obs = planner_name.split("-", 1)[1]
                 if obs not in PAPER[args.robot] or scene not in PAPER[args.robot][obs]:
                     continue
-                planner = make_planner("policy", scenario.robot, checkpoint=getattr(args, f"checkpoint_{obs}"), observation=obs)
+                if args.attempts > 1 and scenario.scene("test", 0).dynamic:
+                    continue
+                planner = make_planner("policy", scenario.robot, checkpoint=getattr(args, f"checkpoint_{obs}"), observation=obs, attempts=args.attempts)
+                if args.attempts > 1:
+                    planner_name = f"{planner_name}-x{args.attempts}"
             else:
                 planner = make_planner(planner_name, scenario.robot, seed=0)
             report = evaluate(planner, problems, scenario.robot, progress=not args.quiet)
@@ -64,13 +71,14 @@ def table(robot: str) -> str:
         "| planner | scene | paper success | success | steps / nodes (mean) | collision checks (mean) | path length (mean) | time per problem (mean / median) |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    for planner in ("policy-global", "policy-local", "birrt"):
+    tried = sorted({p.stem.split("_", 2)[2] for p in OUT.glob(f"{robot}_*_policy-*-x*.json")}, key=lambda n: (n.split("-")[1], int(n.rsplit("x", 1)[1])))
+    for planner in ("policy-global", "policy-local", *tried, "birrt"):
         for scene in SCENES:
             p = cell_path(robot, scene, planner)
             if not p.exists():
                 continue
             d = json.loads(p.read_text())
-            obs = planner.split("-", 1)[1] if planner.startswith("policy-") else None
+            obs = planner.split("-")[1] if planner.startswith("policy-") else None
             paper = PAPER[robot][obs].get(scene) if obs else None
             lines.append(
                 f"| {planner} | {scene} | {'-' if paper is None else f'{paper:.1f}%'} | {100 * d['success_rate']:.1f}% | {d['nodes_mean']:.1f} | "
@@ -87,6 +95,7 @@ def main() -> None:
     ap.add_argument("--planners", nargs="+", default=["policy-global", "policy-local", "birrt"])
     ap.add_argument("--checkpoint-global", help="policy on global points (default: the shipped one)")
     ap.add_argument("--checkpoint-local", help="policy on ray-cast points (default: the shipped one)")
+    ap.add_argument("--attempts", type=int, default=1, help="policy planners: rollouts per problem, the first with the mean action, the rest sampled (default: 1)")
     ap.add_argument("--table-only", action="store_true")
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args()
