@@ -174,6 +174,7 @@ SHIPPED: dict[tuple[str, str], str] = {
     ("disc2d", "surface-normals"): "narrow2d_policy.pt",
     ("sphere3d", "local"): "sphere3d_local_policy.pt",
     ("sphere3d", "global"): "sphere3d_global_policy.pt",
+    ("sshape", "local"): "sshape_local_policy.pt",
 }
 #: the observation a robot's policy uses when none is asked for
 DEFAULT_OBSERVATION = {"disc2d": "surface-normals", "sphere3d": "global", "sshape": "local"}
