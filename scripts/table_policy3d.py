@@ -95,7 +95,9 @@ def main() -> None:
     ap.add_argument("--planners", nargs="+", default=["policy-global", "policy-local", "birrt"])
     ap.add_argument("--checkpoint-global", help="policy on global points (default: the shipped one)")
     ap.add_argument("--checkpoint-local", help="policy on ray-cast points (default: the shipped one)")
-    ap.add_argument("--attempts", type=int, default=1, help="policy planners: rollouts per problem, the first with the mean action, the rest sampled (default: 1)")
+    ap.add_argument(
+        "--attempts", type=int, default=1, help="policy planners: rollouts per problem, the first with the mean action, the rest sampled (default: 1)"
+    )
     ap.add_argument("--table-only", action="store_true")
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args()
