@@ -289,7 +289,7 @@ def test_shipped_policy_loads_and_solves_fixed_problems() -> None:
     assert sum(solved) >= 10, solved
     assert all(r.success == ok for r, ok in zip(results, solved))
     with pytest.raises(ValueError, match="no policy ships"):
-        make_planner("policy", make_scenario("boxes3d", robot="sshape").robot, observation="global")  # none ships for the S-shape's global points yet
+        make_planner("policy", make_scenario("boxes3d", robot="sshape").robot, observation="local-near")  # none ships for the nearest-hits observation
 
 
 def test_metrics_csv_keeps_columns_aligned_when_new_ones_appear(tmp_path: Path) -> None:
@@ -570,3 +570,62 @@ def test_expert_attempts_keep_the_shortest_solution() -> None:
     assert shorter >= 3
     with pytest.raises(ValueError, match="attempts"):
         generate_demos(scenario, 2, seed=0, progress=False, attempts=0)
+
+
+@pytest.mark.parametrize("robot_name", ["sphere3d", "sshape"])
+def test_padded_robot_collides_exactly_within_the_margin(robot_name: str) -> None:
+    """``Robot.padded(m)`` collides wherever the body's exact clearance (coal) is below ``m``;
+    a ball grows exactly, a box by ``m`` along its axes, so near its edges and corners the
+    padded box also covers clearances up to ``m * sqrt(3)``."""
+    from pointplan.evaluation.clearance import Clearance
+    from pointplan.robots import make_robot
+    from pointplan.scenes.scenarios import make_scenario
+
+    robot = make_robot(robot_name)
+    scene = make_scenario("boxes3d", robot=robot_name).problem("val", 3).scene
+    clearance = Clearance(robot, scene.obstacles)
+    pad = robot.padded(0.03)
+    assert robot.parts.box_halfs.shape == pad.parts.box_halfs.shape and pad.parts is not robot.parts
+    rng = np.random.default_rng(0)
+    q = robot.sample_uniform(rng, 400, scene.low, scene.high)
+    d = np.array([clearance(x) for x in q])
+    hit = pad.collides(scene.world, q)
+    band = np.abs(d - 0.03) > 1e-6  # away from the boundary, where round-off could go either way
+    assert hit[band & (d < 0.03)].all()
+    exact = robot_name == "sphere3d"
+    assert (~hit[band & (d > (0.03 if exact else 0.03 * np.sqrt(3)))]).all()
+    if exact:
+        assert (hit[band] == (d[band] < 0.03)).all()
+    assert ((d > 0) & (d < 0.03)).sum() >= 5  # some configurations are free but within the margin
+    assert (robot.collides(scene.world, q) == (d < 0)).all()  # the robot itself is unchanged
+    with pytest.raises(ValueError, match="margin"):
+        robot.padded(-0.01)
+
+
+def test_expert_margin_keeps_the_demonstrations_away_from_obstacles() -> None:
+    """With ``margin`` the expert's paths keep that clearance (checked with coal along the
+    densified path) wherever the padded body found a path; elsewhere they fall back to the
+    body itself, so no problem is lost."""
+    from pointplan.evaluation.clearance import Clearance
+    from pointplan.evaluation.evaluate import densify
+    from pointplan.scenes.scenarios import make_scenario
+
+    scenario = make_scenario("boxes3d", robot="sphere3d")
+    robot = scenario.robot
+    plain = dict(generate_demos(scenario, 8, seed=0, progress=False).paths)
+    padded = dict(generate_demos(scenario, 8, seed=0, progress=False, margin=0.04).paths)
+    assert plain.keys() == padded.keys()
+    kept, fell_back = 0, 0
+    for k, path in padded.items():
+        p = scenario.problem("train", k, seed=0)
+        c = Clearance(robot, p.scene.obstacles)
+        d = min(c(x) for x in densify(robot, path, 0.005))
+        assert d > 0
+        if min(c(p.start), c(p.goal)) > 0.04:  # the padded body could start and end there
+            kept += d > 0.04 - 1e-3
+        else:
+            fell_back += 1
+        np.testing.assert_allclose(path[0], p.start, atol=1e-9)
+    assert kept >= 3
+    dmin_plain = [min(Clearance(robot, scenario.problem("train", k, seed=0).scene.obstacles)(x) for x in densify(robot, q, 0.005)) for k, q in plain.items()]
+    assert min(dmin_plain) < 0.04  # without the margin some path grazes closer than that

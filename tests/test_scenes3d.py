@@ -305,3 +305,41 @@ def test_env_and_evaluator_agree_on_noisy_rollouts(name: str, robot: str) -> Non
     verdicts = [bool(check_path(r, p, x.path)) for p, x in zip(problems, results)]
     assert [x.success for x in results] == verdicts
     assert 0 < sum(verdicts) < len(verdicts)  # both outcomes occur, so the comparison means something
+
+
+@pytest.mark.parametrize("robot", ["sphere3d", "sshape"])
+def test_local_near_keeps_the_nearest_thinned_hits(robot: str) -> None:
+    from pointplan.observers import make_observer
+    from pointplan.observers.rays import thin_grid
+
+    sc = make_scenario("boxes3d", robot=robot)
+    r = sc.robot
+    for i in range(4):
+        problem = sc.problem("val", i)
+        q = problem.start[None]
+        near = make_observer("local-near", r, n_points=16)
+        near.bind([problem.scene])
+        pts, nrm, ok = near.cast(q)
+        kept = thin_grid(pts, nrm, ok, near.spacing)[0]
+        origins = np.einsum("ij,rj->ri", r.rotations(q[0]), near.body_origins) + r.positions(q[0])
+        d = np.linalg.norm(pts[0] - origins, axis=1)[kept]  # every thinned hit's ray length
+        assert kept.sum() > 16
+        obs = near.observe(q, np.random.default_rng(i))[0]
+        back = np.einsum("ij,nj->ni", r.rotations(q[0]), obs[:, :3]) + r.positions(q[0])
+        # each observed point is one of the thinned hits, no two the same, and together they
+        # are the 16 hits with the shortest rays
+        j = np.argmin(np.linalg.norm(back[:, None] - pts[0][kept][None], axis=-1), axis=1)
+        np.testing.assert_allclose(back, pts[0][kept][j], atol=1e-5)
+        assert len(set(j.tolist())) == 16
+        np.testing.assert_allclose(np.sort(d[j]), np.sort(d)[:16], atol=1e-9)
+        # the default observer draws a random subset instead: over draws it reaches farther
+        rand = make_observer("local", r, n_points=16)
+        rand.bind([problem.scene])
+        far = [np.linalg.norm(rand.observe(q, np.random.default_rng(k))[0][:, :3], axis=1).max() for k in range(5)]
+        assert max(far) > np.linalg.norm(obs[:, :3], axis=1).max()
+    # fewer hits than points: every hit once, the rest duplicates of hits
+    near = make_observer("local-near", r, n_points=400)
+    problem = sc.problem("val", 0)
+    near.bind([problem.scene])
+    obs = near.observe(problem.start[None], np.random.default_rng(0))[0]
+    assert len(np.unique(obs.round(6), axis=0)) == thin_grid(*near.cast(problem.start[None]), near.spacing)[0].sum()

@@ -30,13 +30,14 @@ def test_the_sphere_policy_ships_and_plans_without_a_path() -> None:
 
 
 def test_the_sshape_policy_ships_and_its_paths_are_certified() -> None:
-    """The S-shape's interim policy (cloned; 35% of 3D-Boxes validation problems) is found
-    without a path; every path it claims passes the evaluator's check, and sampled retries
-    solve at least what the mean action solves."""
-    assert ("sshape", "local") in shipped_policies()
+    """The S-shape's interim policies (cloned; 35% of 3D-Boxes validation problems each) are
+    found without a path, the global one by default; every path they claim passes the
+    evaluator's check, and sampled retries solve at least what the mean action solves."""
+    assert ("sshape", "local") in shipped_policies() and ("sshape", "global") in shipped_policies()
     scenario = make_scenario("boxes3d", robot="sshape")
+    assert make_planner("policy", scenario.robot, observation="local").policy.observation == "local"
     planner = make_planner("policy", scenario.robot)
-    assert planner.policy.observation == "local" and planner.policy.robot.name == "sshape"
+    assert planner.policy.observation == "global" and planner.policy.robot.name == "sshape" and planner.policy.n_points == 256
     retry = make_planner("policy", scenario.robot, attempts=4)
     problems = scenario.problems("test", 12, seed=0)
     solved = solved_retry = 0
@@ -52,7 +53,7 @@ def test_the_sshape_policy_ships_and_its_paths_are_certified() -> None:
 
 
 def test_a_combination_that_does_not_ship_names_what_does() -> None:
-    with pytest.raises(ValueError, match="no policy ships for robot 'sshape' with 'global'.*sphere3d with 'local'"):
-        shipped_checkpoint("sshape", "global")
+    with pytest.raises(ValueError, match="no policy ships for robot 'sshape' with 'local-near'.*sphere3d with 'local'"):
+        shipped_checkpoint("sshape", "local-near")
     with pytest.raises(ValueError, match="'interior'"):
         make_planner("policy", make_scenario("boxes3d", robot="sphere3d").robot, observation="interior")

@@ -603,6 +603,7 @@ BC_OPTIONS = {
     "eval-episodes": "eval_episodes",
     "expert-max-nodes": "max_nodes",
     "expert-attempts": "bc.expert_attempts",
+    "expert-margin": "bc.expert_margin",
 }
 
 

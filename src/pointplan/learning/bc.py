@@ -55,8 +55,8 @@ def resample_path(robot: Robot, path: np.ndarray) -> np.ndarray:
 
 
 #: one demonstration to plan: (env, robot, split, problem index, problem seed, planner
-#: seed, max nodes, start or None for the problem's own, Bi-RRT attempts)
-DemoJob = tuple[str, "str | None", str, int, int, int, int, "np.ndarray | None", int]
+#: seed, max nodes, start or None for the problem's own, Bi-RRT attempts, clearance margin)
+DemoJob = tuple[str, "str | None", str, int, int, int, int, "np.ndarray | None", int, float]
 
 #: planner seeds of a job's attempts after its first are this far apart
 _ATTEMPT_SEED_STRIDE = 1_000_003
@@ -75,16 +75,23 @@ def _plan_demo(job: DemoJob) -> tuple[int, np.ndarray | None]:
     from ..planners.base import path_length
     from ..planners.birrt import BiRRT
 
-    env, robot_name, split, index, seed, planner_seed, max_nodes, start, attempts = job
+    env, robot_name, split, index, seed, planner_seed, max_nodes, start, attempts, margin = job
     scenario = make_scenario(env, robot=robot_name)
     p = scenario.problem(split, index, seed=seed)
     if start is not None:
         p = Problem(p.scene, start, p.goal, p.tag)
     best, best_len = None, float("inf")
-    for a in range(max(1, attempts)):
-        res = BiRRT(scenario.robot, max_nodes=max_nodes, seed=planner_seed + a * _ATTEMPT_SEED_STRIDE).plan(p)
-        if res.success and (length := path_length(scenario.robot, res.path)) < best_len:
-            best, best_len = res.path, length
+    # with a margin, plan for the padded body first (a path that keeps its distance from the
+    # obstacles); where that fails (a start or goal closer than the margin, a gap too narrow
+    # for the padded body), plan for the body itself
+    bodies = [scenario.robot.padded(margin), scenario.robot] if margin > 0 else [scenario.robot]
+    for body in bodies:
+        for a in range(max(1, attempts)):
+            res = BiRRT(body, max_nodes=max_nodes, seed=planner_seed + a * _ATTEMPT_SEED_STRIDE).plan(p)
+            if res.success and (length := path_length(scenario.robot, res.path)) < best_len:
+                best, best_len = res.path, length
+        if best is not None:
+            break
     return index, (resample_path(scenario.robot, best) if best is not None else None)
 
 
@@ -156,16 +163,19 @@ def generate_demos(
     workers: int = 1,
     address: str | None = None,
     attempts: int = 1,
+    margin: float = 0.0,
 ) -> Demos:
     """Plan ``n_problems`` training problems with Bi-RRT and cut the paths into steps
     (``workers`` Ray workers or processes, see :func:`demo_pool`); with ``attempts > 1``
     each problem is planned that many times and its shortest solution kept (the first
-    attempt is the single-attempt run's, so its problems and solutions are a subset)."""
+    attempt is the single-attempt run's, so its problems and solutions are a subset). With
+    ``margin > 0`` the expert plans for the body grown by ``margin`` (:meth:`Robot.padded`),
+    falling back to the body itself where the padded one finds no path."""
     if attempts < 1:
         raise ValueError(f"attempts must be >= 1, not {attempts}")
     robot_name = scenario.robot.name if scenario.robot.dim == 3 else None
     index = [_demo_index(seed, n_problems, i) for i in range(n_problems)]
-    jobs: list[DemoJob] = [(scenario.name, robot_name, split, k, seed, seed * 7_919 + k, max_nodes, None, attempts) for k in index]
+    jobs: list[DemoJob] = [(scenario.name, robot_name, split, k, seed, seed * 7_919 + k, max_nodes, None, attempts, float(margin)) for k in index]
     pool = demo_pool(workers, address)
     try:
         paths = plan_demos(jobs, pool, progress)
@@ -322,6 +332,10 @@ class BCConfig:
     #: more consistent demonstrations: an expert that picks the shorter way round an
     #: obstacle, rather than either way at random, is easier to clone)
     expert_attempts: int = field(default=1, metadata={"min": 1})
+    #: the expert plans for the robot's body grown by this much (falling back to the body
+    #: itself where that finds no path), so that its paths keep their distance from the
+    #: obstacles instead of grazing them
+    expert_margin: float = field(default=0.0, metadata={"min": 0})
 
 
 def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: Demos | None = None) -> dict[str, Any]:
@@ -337,7 +351,16 @@ def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: D
     if demos is None and cfg.demos_file and Path(cfg.demos_file).exists():
         demos = load_demos(cfg.demos_file, scenario)
     if demos is None:
-        demos = generate_demos(scenario, cfg.n_problems, cfg.seed, progress=progress, workers=cfg.workers, address=cfg.address, attempts=cfg.expert_attempts)
+        demos = generate_demos(
+            scenario,
+            cfg.n_problems,
+            cfg.seed,
+            progress=progress,
+            workers=cfg.workers,
+            address=cfg.address,
+            attempts=cfg.expert_attempts,
+            margin=cfg.expert_margin,
+        )
         if cfg.demos_file:
             save_demos(cfg.demos_file, scenario, demos, "train", cfg.seed)
     t_demos = time.perf_counter() - t0

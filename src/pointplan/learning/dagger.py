@@ -77,7 +77,7 @@ def _label_jobs(cfg: DaggerConfig, scenario: Scenario, rnd: int, results: list[A
         k = min(cfg.labels_per_failure, len(res.path))
         index = _rollout_index(cfg.bc.seed, rnd, cfg.rollouts, i)
         for j in np.unique(np.linspace(0, len(res.path) - 1, k).round().astype(int)):
-            jobs.append((scenario.name, robot_name, "train", index, cfg.bc.seed, index * 100 + int(j), cfg.max_nodes, res.path[j].copy(), 1))
+            jobs.append((scenario.name, robot_name, "train", index, cfg.bc.seed, index * 100 + int(j), cfg.max_nodes, res.path[j].copy(), 1, 0.0))
     return jobs
 
 

@@ -10,7 +10,7 @@ from ..robots.base import Robot
 from .base import Observer, PointSetObserver
 from .image import OccupancyImage
 from .points import GlobalPoints, InteriorPoints, SurfaceNormals, SurfacePoints
-from .rays import LocalRays
+from .rays import LocalRays, NearestRays
 
 OBSERVERS: dict[str, type[Observer]] = {
     "surface": SurfacePoints,
@@ -19,6 +19,7 @@ OBSERVERS: dict[str, type[Observer]] = {
     "image": OccupancyImage,
     "global": GlobalPoints,
     "local": LocalRays,
+    "local-near": NearestRays,
 }
 
 
@@ -49,6 +50,7 @@ __all__ = [
     "GlobalPoints",
     "InteriorPoints",
     "LocalRays",
+    "NearestRays",
     "Observer",
     "OccupancyImage",
     "PointSetObserver",

@@ -73,6 +73,8 @@ class LocalRays(Observer):
 
     name = "local"
     with_normals = True
+    #: keep the ``n_points`` hits nearest to the body instead of a random subset
+    nearest = False
 
     def __init__(self, robot: Robot, n_points: int = 64, n_rays: int = 256, max_range: float = 0.7, spacing: float = 0.06) -> None:
         if robot.dim != 3:
@@ -126,6 +128,7 @@ class LocalRays(Observer):
         pos = self.robot.positions(q)
         origins = np.einsum("eij,rj->eri", rot, self.body_origins) + pos[:, None, :]
         dirs = np.einsum("eij,rj->eri", rot, self.body_dirs)
+        self._origins_world = origins
         hits = cast_rays(self.stacked_world(t), origins, dirs, self.max_range)
         ok = hits.hit & (hits.distance <= self.max_range)
         # a ray whose origin (a point of the body) pokes out of the workspace sees nothing:
@@ -140,9 +143,15 @@ class LocalRays(Observer):
         pw, nw, ok = self.cast(q, t)
         kept = thin_grid(pw, nw, ok, self.spacing)
         counts = kept.sum(1)
-        # move the kept rays to the front, then draw N of them
-        order = np.argsort(~kept, axis=1, kind="stable")
-        idx = np.take_along_axis(order, random_subsets(counts, kept.shape[1], self.n_points, rng), axis=1)
+        if self.nearest:
+            # the kept rays ordered by how far from the body they hit, the nearest first
+            d = np.linalg.norm(pw - self._origins_world, axis=-1)
+            order = np.argsort(np.where(kept, d, np.inf), axis=1, kind="stable")
+            idx = np.take_along_axis(order, nearest_subsets(counts, self.n_points, rng), axis=1)
+        else:
+            # move the kept rays to the front, then draw N of them
+            order = np.argsort(~kept, axis=1, kind="stable")
+            idx = np.take_along_axis(order, random_subsets(counts, kept.shape[1], self.n_points, rng), axis=1)
         p = np.take_along_axis(pw, idx[..., None], axis=1)
         n = np.take_along_axis(nw, idx[..., None], axis=1)
         pb, nb = self.robot.to_body_frame(q, p, n)
@@ -150,3 +159,21 @@ class LocalRays(Observer):
         out = np.concatenate([pb, nb], -1)
         out[counts == 0] = 0.0
         return out.astype(np.float32)
+
+
+def nearest_subsets(counts: NDArray[np.int64], n: int, rng: np.random.Generator) -> NDArray[np.int64]:
+    """Indices ``(E, n)`` into sets sorted nearest first: the first ``n`` of each, padded with
+    random duplicates of its items where a set has fewer than ``n`` (index 0 if empty)."""
+    e = len(counts)
+    idx = np.broadcast_to(np.arange(n), (e, n))
+    dup = (rng.random((e, n)) * np.maximum(counts, 1)[:, None]).astype(np.int64)
+    return np.where(idx >= counts[:, None], dup, idx)
+
+
+class NearestRays(LocalRays):
+    """:class:`LocalRays` keeping the ``n_points`` hits nearest to the robot's body (by ray
+    length) instead of a random subset, so that an obstacle the robot touches is always in
+    the observation (a deviation from the paper; ``docs/learning.md``)."""
+
+    name = "local-near"
+    nearest = True

@@ -10,6 +10,7 @@ and every part of the package (env, planners, evaluator) uses this one distance.
 
 from __future__ import annotations
 
+import copy
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
@@ -170,6 +171,17 @@ class Robot(ABC):
                 .any(-1)
             )
         return hit.reshape(lead) if world.batch_shape == () else hit
+
+    def padded(self, margin: float) -> Robot:
+        """A copy of this robot whose every part is grown by ``margin`` (sphere radii and box
+        half sides): a path free for the copy keeps at least ``margin`` of clearance for this
+        robot (used to plan demonstrations away from obstacles)."""
+        if margin < 0:
+            raise ValueError(f"margin must be >= 0, not {margin}")
+        out = copy.copy(self)
+        p = self.parts
+        out.parts = BodyParts(p.sphere_centers, p.sphere_radii + margin, p.box_centers, p.box_rotations, p.box_halfs + margin)
+        return out
 
     # -------------------------------------------------------------- certified motions
     def grown_parts(self, seg: Array, reach: float) -> tuple[Array, Array]:

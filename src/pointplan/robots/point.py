@@ -52,6 +52,11 @@ class _Ball(Robot):
         r2 = self.radius * self.radius + (reach * reach) * np.einsum("...i,...i->...", seg, seg)
         return np.sqrt(r2)[..., None], np.zeros(seg.shape[:-1] + (0, self.dim))
 
+    def padded(self, margin: float) -> Robot:
+        out = super().padded(margin)
+        out.radius = self.radius + float(margin)  # type: ignore[attr-defined]
+        return out
+
     def collides(self, world, q, radii=None, halfs=None):  # type: ignore[no-untyped-def]
         q = np.asarray(q, np.float64)
         r = self.radius if radii is None else np.asarray(radii, np.float64)[..., 0]
