@@ -274,3 +274,40 @@ def test_attempts_bad_input() -> None:
     dyn = make_scenario("dynamic3d", robot="sphere3d").problem("val", 0, seed=0)
     with pytest.raises(ValueError, match="static scenes"):
         PolicyPlanner(policy, attempts=2).plan(dyn)
+
+
+def test_greedy_goal_applies_to_the_ray_cast_observer_too() -> None:
+    """The ray-cast observer plans through the batched core; the greedy goal test applies
+    there as well (it once did not: ``local`` policies then rolled out to the tolerance
+    while ``global`` ones stopped at the first free edge). Its steps are the first steps of
+    the rollout without it, every greedy path ends with a certified edge to the goal, and
+    in a moving scene the test is off (an edge free now may be blocked later)."""
+    from pointplan.scenes.scenarios import make_scenario
+
+    sc = make_scenario("boxes3d", robot="sshape")
+    robot = sc.robot
+    greedy = make_planner("policy", robot, observation="local")
+    plain = make_planner("policy", robot, observation="local", greedy_goal=False)
+    shorter = 0
+    for p in sc.problems("test", 10, seed=0):
+        g, r = greedy.plan(p), plain.plan(p)
+        k = g.nodes + 1
+        np.testing.assert_allclose(g.path[:k], r.path[:k], atol=1e-9, rtol=0)
+        if g.info.get("greedy_goal"):
+            assert g.success and np.array_equal(g.path[-1], p.goal)
+            assert check_path(robot, p, g.path, tolerance=1e-9)
+            # the edge was not free one step earlier (else it would have stopped there)
+            if g.nodes > 0:
+                assert not check_path(robot, Problem(p.scene, g.path[-3], p.goal, p.tag), np.stack([g.path[-3], p.goal]))
+        assert g.success or not r.success
+        shorter += g.nodes < r.nodes
+    assert shorter >= 2
+    dyn = make_scenario("dynamic3d", robot="sshape").problems("val", 2, seed=0)
+    for p in dyn:
+        res = greedy.plan(p)
+        assert not res.info.get("greedy_goal")
+    from pointplan.envs.core import EnvConfig
+    from pointplan.planners.policy import rollout_batch
+
+    with pytest.raises(ValueError, match="static scenes only"):
+        rollout_batch(greedy.policy, robot, EnvConfig(observation="local"), dyn, 80, greedy_goal=True)

@@ -13,7 +13,8 @@ Its rollouts are those of ``rollout_batch`` with one problem. For a ball (disc, 
 among boxes the whole rollout is one compiled call (:mod:`._policy_kernels`, same
 arithmetic; ``compiled=False`` keeps the Python path). With ``greedy_goal`` (the default)
 ``plan`` stops at the first configuration from which the straight edge to the goal is
-certified free, and ends the path at the goal (``info["greedy_goal"]``).
+certified free, and ends the path at the goal (``info["greedy_goal"]``), whatever the
+observer, in static scenes (among moving obstacles it is off).
 
 The environment stops a rollout anywhere within ``goal_tolerance`` of the goal. The
 planner then tries the last step to the goal itself (the geodesic from the policy's last
@@ -136,10 +137,17 @@ def rollout_batch(
     seed: int = 0,
     chunk: int = 100,
     connect_goal: bool = False,
+    greedy_goal: bool = False,
 ) -> list[PlanResult]:
     """Roll ``act(obs, q, goal) -> actions`` out on every problem, ``chunk`` at a time.
     The time of a chunk is shared equally by its problems. With ``connect_goal`` each
-    successful path ends at the goal when it can (:func:`connect_to_goal`)."""
+    successful path ends at the goal when it can (:func:`connect_to_goal`). With
+    ``greedy_goal`` (static scenes only) a problem stops at the first configuration, the
+    start included, from which the straight edge to the goal is certified free
+    (:func:`~pointplan.planners.edges.edge_free`, counted in its collision checks), and
+    its path ends at the goal, as ``PolicyPlanner.plan`` does for point-set observers."""
+    if greedy_goal and any(p.scene.dynamic for p in problems):
+        raise ValueError("greedy_goal connects to the goal in static scenes only")
     results: list[PlanResult] = []
     env = replace(env, horizon=horizon)
     for c0 in range(0, len(problems), chunk):
@@ -156,7 +164,21 @@ def rollout_batch(
         active = np.ones(n, bool)
         success = np.zeros(n, bool)
         crushed = np.zeros(n, bool)
+        at_goal = np.zeros(n, bool)
+
+        def try_goal(which: np.ndarray) -> None:
+            for i in np.flatnonzero(which):
+                sc = probs[i].scene
+                ok, c = edge_free(robot, sc.world, core.q[i], probs[i].goal, 0.01, sc.low, sc.high)
+                checks[i] += c
+                if ok:
+                    at_goal[i], success[i], active[i] = True, True, False
+
         for t in range(horizon):
+            if greedy_goal:
+                try_goal(active)
+                if not active.any():
+                    break
             obs = core.observe(rng)["observation"]  # (at each problem's own time step)
             a = np.asarray(act(obs, core.q.copy(), core.goal.copy()), np.float32)
             a[~active] = 0.0  # finished problems stand still
@@ -169,9 +191,17 @@ def rollout_batch(
             active &= ~(term | info["crushed"])  # a moving obstacle that hits the robot ends it
             if not active.any():
                 break
+        if greedy_goal:  # where the rollouts that did not arrive stopped
+            try_goal(~success)
         dt = (time.perf_counter() - t0) / n
         for i in range(n):
             k = int(length[i])
+            if at_goal[i]:
+                path = np.concatenate([paths[:k, i], np.asarray(probs[i].goal, np.float64)[None]])
+                res = PlanResult(path=path, success=True, nodes=k - 1, collision_checks=int(checks[i]), time_s=dt)
+                res.info.update({"end": "goal", "goal_connection": "free", "greedy_goal": True})
+                results.append(res)
+                continue
             res = PlanResult(path=paths[:k, i].copy(), success=bool(success[i]), nodes=k - 1, collision_checks=int(checks[i]), time_s=dt)
             if crushed[i]:
                 res.info["end"] = "crushed"
@@ -381,7 +411,8 @@ class PolicyPlanner:
             return self.policy(obs, q, goal, noise=self.action_noise * rng.standard_normal((len(q), dim)))
 
         with torch_threads(1):
-            return rollout_batch(act, self.robot, self.env, [problem], self.horizon, self.seed, connect_goal=self.connect_goal)[0]
+            greedy = self.greedy_goal and not problem.scene.dynamic
+            return rollout_batch(act, self.robot, self.env, [problem], self.horizon, self.seed, connect_goal=self.connect_goal, greedy_goal=greedy)[0]
 
     def _plan_mean(self, problem: Problem) -> PlanResult:
         """The mean-action rollout."""
@@ -420,8 +451,12 @@ class PolicyPlanner:
             self._kernel = K._rollout
 
     def _plan_batched(self, problem: Problem) -> PlanResult:
+        """The rollout through the batched core (observers without the one-robot path, such
+        as the ray-cast one, and moving scenes; the greedy goal connection in static
+        scenes only: among moving obstacles an edge free now may not be free later)."""
+        greedy = self.greedy_goal and not problem.scene.dynamic
         with torch_threads(1):
-            res = rollout_batch(self.policy, self.robot, self.env, [problem], self.horizon, self.seed, connect_goal=self.connect_goal)[0]
+            res = rollout_batch(self.policy, self.robot, self.env, [problem], self.horizon, self.seed, connect_goal=self.connect_goal, greedy_goal=greedy)[0]
         return res
 
     def _act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
