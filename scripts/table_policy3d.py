@@ -9,7 +9,10 @@ of ``pointplan eval``); ``--table-only`` reads them back. Policies come from the
 (``--checkpoint-global`` / ``--checkpoint-local`` evaluate other files). With
 ``--attempts K`` the policy planners retry failed rollouts with sampled actions
 (``pointplan eval --attempts``); their cells are named ``policy-local-xK`` and skip the
-moving scene, where a rollout cannot start over.
+moving scene, where a rollout cannot start over. With ``--escape K`` a rollout samples K
+actions wherever a step left the robot where it was (``pointplan eval --escape``); cells
+``policy-local-escK``, in every scene. Without it the policies plan with the mean action
+throughout, whatever the planner's default for the robot.
 """
 
 from __future__ import annotations
@@ -52,7 +55,11 @@ def run(args: argparse.Namespace) -> None:
                     continue
                 if args.attempts > 1 and scenario.scene("test", 0).dynamic:
                     continue
-                planner = make_planner("policy", scenario.robot, checkpoint=getattr(args, f"checkpoint_{obs}"), observation=obs, attempts=args.attempts)
+                planner = make_planner(
+                    "policy", scenario.robot, checkpoint=getattr(args, f"checkpoint_{obs}"), observation=obs, attempts=args.attempts, escape=args.escape
+                )
+                if args.escape > 0:
+                    planner_name = f"{planner_name}-esc{args.escape}"
                 if args.attempts > 1:
                     planner_name = f"{planner_name}-x{args.attempts}"
             else:
@@ -71,8 +78,16 @@ def table(robot: str) -> str:
         "| planner | scene | paper success | success | steps / nodes (mean) | collision checks (mean) | path length (mean) | time per problem (mean / median) |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    tried = sorted({p.stem.split("_", 2)[2] for p in OUT.glob(f"{robot}_*_policy-*-x*.json")}, key=lambda n: (n.split("-")[1], int(n.rsplit("x", 1)[1])))
-    for planner in ("policy-global", "policy-local", *tried, "birrt"):
+
+    def order(name: str) -> tuple[str, int, int]:  # policy-OBS[-escK][-xK]: by observation, escape, attempts
+        parts = name.split("-")[2:]
+        esc = next((int(p[3:]) for p in parts if p.startswith("esc")), 0)
+        att = next((int(p[1:]) for p in parts if p.startswith("x")), 1)
+        return name.split("-")[1], esc, att
+
+    base = ("policy-global", "policy-local")
+    tried = sorted({p.stem.split("_", 2)[2] for p in OUT.glob(f"{robot}_*_policy-*.json")} - set(base), key=order)
+    for planner in (*base, *tried, "birrt"):
         for scene in SCENES:
             p = cell_path(robot, scene, planner)
             if not p.exists():
@@ -97,6 +112,12 @@ def main() -> None:
     ap.add_argument("--checkpoint-local", help="policy on ray-cast points (default: the shipped one)")
     ap.add_argument(
         "--attempts", type=int, default=1, help="policy planners: rollouts per problem, the first with the mean action, the rest sampled (default: 1)"
+    )
+    ap.add_argument(
+        "--escape",
+        type=int,
+        default=0,
+        help="policy planners: after a step that left the robot where it was, this many sampled steps (cells named policy-OBS-escK; default: 0, the mean action throughout)",
     )
     ap.add_argument("--table-only", action="store_true")
     ap.add_argument("--quiet", action="store_true")

@@ -381,6 +381,24 @@ def test_eval_without_the_greedy_goal_test(tmp_path: Path, capsys: pytest.Captur
     assert "--no-greedy-goal" in capsys.readouterr().err
 
 
+def test_eval_escape_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--escape`` reaches the policy planner (the S-shape's cloned policy pins itself
+    against obstacles; sampled steps after a stall change its rollouts); other planners
+    and negative counts are refused."""
+    runs = {}
+    for k in (0, 10):
+        out = tmp_path / f"esc{k}.json"
+        args = ["eval", "--env", "boxes3d", "--robot", "sshape", "--observation", "local", "--planner", "policy", "--episodes", "8"]
+        assert main([*args, "--escape", str(k), "--json", str(out), "--quiet"]) == 0
+        runs[k] = json.loads(out.read_text())
+    assert runs[10]["success_rate"] >= runs[0]["success_rate"]
+    assert runs[10]["nodes_mean"] != runs[0]["nodes_mean"]
+    assert main(["eval", "--planner", "birrt", "--episodes", "2", "--escape", "3", "--quiet"]) == 2
+    assert "--escape" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["eval", "--planner", "policy", "--episodes", "2", "--escape", "-1", "--quiet"])
+
+
 def test_eval_attempts_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``--attempts`` reaches the policy planner; other planners and bad noise are refused."""
     out = tmp_path / "m.json"

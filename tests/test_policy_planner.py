@@ -169,7 +169,7 @@ def test_one_robot_rollout_in_3d_matches_the_batched_one(robot_name: str) -> Non
     torch.manual_seed(0)
     actor = Actor((64, 6), robot.twist_dim, robot.twist_dim, NetConfig(EncoderConfig("pointnet", 32, 2), head_width=32, head_layers=2))
     policy = Policy(actor, robot, {"observation": "global", "n_points": 64, "horizon": 12})
-    planner = PolicyPlanner(policy, greedy_goal=False)  # the rollout itself, to its end
+    planner = PolicyPlanner(policy, greedy_goal=False, escape=0)  # the rollout itself, to its end
     assert planner.fast is not None
     for i in range(2):
         p = scenario.problem("test", i, seed=0)
@@ -311,3 +311,66 @@ def test_greedy_goal_applies_to_the_ray_cast_observer_too() -> None:
 
     with pytest.raises(ValueError, match="static scenes only"):
         rollout_batch(greedy.policy, robot, EnvConfig(observation="local"), dyn, 80, greedy_goal=True)
+
+
+@pytest.mark.parametrize("observation", ["global", "local"])
+def test_escape_samples_only_after_a_stall(observation: str) -> None:
+    """With an escape, the rollout is the mean-action one up to and including the first
+    step that left the robot where it was; from there it goes elsewhere. Every success is
+    certified by the evaluator's own check, and the escape solves more of these problems
+    than the mean action (the cloned S-shape pins itself against obstacles). The point-set
+    observer plans through the one-robot rollout, the ray-cast one through the batched
+    core: both are covered."""
+    from pointplan.planners.policy import Escape, PolicyPlanner
+    from pointplan.scenes.scenarios import make_scenario
+
+    sc = make_scenario("boxes3d", robot="sshape")
+    robot = sc.robot
+    ckpt = shipped_checkpoint("sshape", observation)
+    plain = PolicyPlanner(ckpt, robot=robot, escape=0)
+    esc = PolicyPlanner(ckpt, robot=robot, escape=Escape(steps=10, noise=2.0, still=0.01))
+    assert PolicyPlanner(ckpt, robot=robot).escape == Escape(10, 2.0, 0.01)  # the S-shape's default
+    stalled = solved_plain = solved_esc = 0
+    for p in sc.problems("val", 16, seed=0):
+        a, b = plain.plan(p), esc.plan(p)
+        assert "escapes" not in a.info and b.info["escapes"] >= 0
+        for r in (a, b):
+            assert bool(check_path(robot, p, r.path)) == r.success
+        solved_plain += a.success
+        solved_esc += b.success
+        walk = a.path[: a.nodes + 1]  # the rollout's own configurations (no goal appended)
+        moved = robot.distance(walk[:-1], walk[1:])
+        still = np.flatnonzero(moved < 0.01)
+        if len(still) == 0:  # never stuck: the same rollout
+            assert b.info["escapes"] == 0 and b.nodes == a.nodes
+            np.testing.assert_array_equal(a.path, b.path)
+            continue
+        stalled += 1
+        k = int(still[0]) + 2  # configurations up to the end of the first still step
+        np.testing.assert_allclose(b.path[:k], a.path[:k], atol=1e-9, rtol=0)
+        assert b.info["escapes"] >= 1
+        assert b.path.shape != a.path.shape or not np.allclose(b.path, a.path)  # it went elsewhere from there
+    assert stalled >= 4
+    assert solved_esc > solved_plain
+
+
+def test_escape_in_a_moving_scene_and_bad_input() -> None:
+    from pointplan.planners.policy import Escape, PolicyPlanner
+    from pointplan.scenes.scenarios import make_scenario
+
+    sc = make_scenario("dynamic3d", robot="sshape")
+    planner = PolicyPlanner(shipped_checkpoint("sshape", "local"), robot=sc.robot, escape=10)
+    assert planner.escape.steps == 10
+    escapes = 0
+    for p in sc.problems("val", 4, seed=0):
+        r = planner.plan(p)
+        assert bool(check_path(sc.robot, p, r.path)) == r.success
+        escapes += r.info["escapes"]
+    assert escapes >= 1
+    for bad in (dict(steps=-1), dict(steps=2.5), dict(noise=-1.0), dict(still=float("nan"))):
+        with pytest.raises(ValueError, match="escape"):
+            Escape(**bad)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="escape"):
+        PolicyPlanner(shipped_checkpoint("sshape", "local"), escape=-3)
+    sphere = PolicyPlanner(shipped_checkpoint("sphere3d", "local"))
+    assert sphere.escape.steps == 0  # off for the robots where validation showed no change

@@ -123,6 +123,8 @@ def _check_checkpoint(args: argparse.Namespace, names: Sequence[str]) -> None:
         raise CLIError(f"--no-greedy-goal is for --planner policy, not {', '.join(names)}")
     if getattr(args, "attempts", 1) > 1 and not any(n.lower() in POLICY_PLANNERS for n in names):
         raise CLIError(f"--attempts is for --planner policy or hybrid, not {', '.join(names)}")
+    if getattr(args, "escape", None) is not None and not any(n.lower() in POLICY_PLANNERS for n in names):
+        raise CLIError(f"--escape is for --planner policy or hybrid, not {', '.join(names)}")
     noise = getattr(args, "action_noise", 1.0)
     if not (math.isfinite(noise) and noise >= 0):
         raise CLIError(f"--action-noise must be a finite number >= 0, not {noise}")
@@ -173,6 +175,8 @@ def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
                 kwargs["greedy_goal"] = False
         if getattr(args, "attempts", 1) > 1:
             kwargs.update(attempts=args.attempts, action_noise=args.action_noise)
+        if getattr(args, "escape", None) is not None:
+            kwargs["escape"] = args.escape
         if name == "hybrid":
             kwargs.update(max_nodes=args.max_nodes, seed=seed)
     elif name in MPNET_PLANNERS:
@@ -237,6 +241,11 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
         type=float,
         default=1.0,
         help="the spread of the sampled attempts of --attempts, as a multiple of the policy's own (default: %(default)s)",
+    )
+    p.add_argument(
+        "--escape",
+        type=non_negative_int,
+        help="--planner policy or hybrid: after a step that leaves the robot where it was (pressed against an obstacle), sample this many actions from twice the policy's spread, then the mean action again; 0 turns it off (default: 10 for the S-shape, chosen on validation; 0 for the other robots)",
     )
     p.add_argument("--seed", type=non_negative_int, default=0, help="problem-set seed, 0 or more (default: %(default)s)")
 

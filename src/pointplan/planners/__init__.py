@@ -45,12 +45,14 @@ def _hybrid_factory(
     stall_distance: float = 0.035,
     attempts: int = 1,
     action_noise: float = 1.0,
+    escape: Any = None,
     **kw: Any,
 ) -> Planner:
     """The policy (``checkpoint`` or the shipped one), stopped when it stalls (moved less
     than ``stall_distance`` over ``stall_steps`` steps) or at its horizon, then Bi-RRT
     (``max_nodes``, ``seed``, other keywords) from its configuration closest to the goal.
-    ``attempts``, ``action_noise``: the policy's sampled retries (:class:`PolicyPlanner`)."""
+    ``attempts``, ``action_noise``, ``escape``: the policy's sampled retries and stall
+    escapes (:class:`PolicyPlanner`)."""
     from .hybrid import HybridPlanner
 
     policy = _policy_factory(
@@ -61,6 +63,7 @@ def _hybrid_factory(
         stall_distance=stall_distance,
         attempts=attempts,
         action_noise=action_noise,
+        escape=escape,
     )
     return HybridPlanner(policy, BiRRT(robot, max_nodes=max_nodes, seed=seed, **kw))  # type: ignore[arg-type]
 

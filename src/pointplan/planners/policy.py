@@ -138,6 +138,9 @@ def rollout_batch(
     chunk: int = 100,
     connect_goal: bool = False,
     greedy_goal: bool = False,
+    escape: Escape | None = None,
+    noise: float = 0.0,
+    noise_rng: np.random.Generator | None = None,
 ) -> list[PlanResult]:
     """Roll ``act(obs, q, goal) -> actions`` out on every problem, ``chunk`` at a time.
     The time of a chunk is shared equally by its problems. With ``connect_goal`` each
@@ -145,9 +148,18 @@ def rollout_batch(
     ``greedy_goal`` (static scenes only) a problem stops at the first configuration, the
     start included, from which the straight edge to the goal is certified free
     (:func:`~pointplan.planners.edges.edge_free`, counted in its collision checks), and
-    its path ends at the goal, as ``PolicyPlanner.plan`` does for point-set observers."""
+    its path ends at the goal, as ``PolicyPlanner.plan`` does for point-set observers.
+
+    ``noise > 0`` samples every action, ``act(obs, q, goal, noise=s * N(0, 1))`` with
+    ``s = noise``; an ``escape`` (:class:`Escape`) samples the next ``escape.steps``
+    actions of a problem with ``s = escape.noise`` wherever a step moved its robot less
+    than ``escape.still``. Both need an ``act`` that takes ``noise`` (a
+    :class:`~pointplan.models.policy.Policy` does) and draw from ``noise_rng`` (default:
+    seeded by ``seed`` and the chunk)."""
     if greedy_goal and any(p.scene.dynamic for p in problems):
         raise ValueError("greedy_goal connects to the goal in static scenes only")
+    escaping_on = escape is not None and escape.steps > 0
+    sampled = escaping_on or noise > 0
     results: list[PlanResult] = []
     env = replace(env, horizon=horizon)
     for c0 in range(0, len(problems), chunk):
@@ -165,6 +177,10 @@ def rollout_batch(
         success = np.zeros(n, bool)
         crushed = np.zeros(n, bool)
         at_goal = np.zeros(n, bool)
+        nrng = noise_rng if noise_rng is not None else np.random.default_rng(np.random.SeedSequence([seed, c0, 0x6E6F6973]))
+        left = np.zeros(n, np.int64)  # sampled steps of an escape still to come, per problem
+        escapes = np.zeros(n, np.int64)
+        prev = core.q.copy()
 
         def try_goal(which: np.ndarray) -> None:
             for i in np.flatnonzero(which):
@@ -180,9 +196,22 @@ def rollout_batch(
                 if not active.any():
                     break
             obs = core.observe(rng)["observation"]  # (at each problem's own time step)
-            a = np.asarray(act(obs, core.q.copy(), core.goal.copy()), np.float32)
+            if sampled:
+                esc = left > 0
+                scale = np.where(esc, escape.noise if escape is not None else 0.0, noise)
+                draw = nrng.standard_normal((n, len(robot.action_scale)))
+                a = np.asarray(act(obs, core.q.copy(), core.goal.copy(), noise=scale[:, None] * draw), np.float32)  # type: ignore[call-arg]
+                left[esc] -= 1
+            else:
+                a = np.asarray(act(obs, core.q.copy(), core.goal.copy()), np.float32)
             a[~active] = 0.0  # finished problems stand still
             _, term, _, info = core.step(a)
+            if escaping_on:
+                assert escape is not None
+                stuck = active & (left == 0) & (np.asarray(robot.distance(core.q, prev)) < escape.still)
+                left[stuck] = escape.steps
+                escapes += stuck
+                prev = core.q.copy()
             paths[t + 1] = core.q
             length += active
             checks += np.where(active, info["collision_checks"], 0)
@@ -200,15 +229,46 @@ def rollout_batch(
                 path = np.concatenate([paths[:k, i], np.asarray(probs[i].goal, np.float64)[None]])
                 res = PlanResult(path=path, success=True, nodes=k - 1, collision_checks=int(checks[i]), time_s=dt)
                 res.info.update({"end": "goal", "goal_connection": "free", "greedy_goal": True})
+                if escaping_on:
+                    res.info["escapes"] = int(escapes[i])
                 results.append(res)
                 continue
             res = PlanResult(path=paths[:k, i].copy(), success=bool(success[i]), nodes=k - 1, collision_checks=int(checks[i]), time_s=dt)
             if crushed[i]:
                 res.info["end"] = "crushed"
+            if escaping_on:
+                res.info["escapes"] = int(escapes[i])
             if connect_goal:
                 res = connect_to_goal(robot, probs[i], res, t=k)
             results.append(res)
     return results
+
+
+@dataclass(frozen=True)
+class Escape:
+    """Noise switched on where a rollout is stuck: after a step that moved the robot less
+    than ``still`` (geodesic distance), the next ``steps`` actions are sampled as
+    ``tanh(mean + noise * std * N(0, 1))``, then the mean action again (``steps = 0``: off).
+    The cloned S-shape policies mostly fail by pressing against an obstacle with the same
+    mean action until the horizon; a few sampled steps free them within the one rollout
+    (``docs/learning.md``, "Escaping a stall")."""
+
+    steps: int = 10
+    noise: float = 2.0
+    still: float = 0.01
+
+    def __post_init__(self) -> None:
+        if int(self.steps) != self.steps or self.steps < 0:
+            raise ValueError(f"escape steps must be an integer >= 0, not {self.steps}")
+        if not np.isfinite(self.noise) or self.noise < 0:
+            raise ValueError(f"escape noise must be a finite number >= 0, not {self.noise}")
+        if not np.isfinite(self.still) or self.still < 0:
+            raise ValueError(f"escape still must be a finite number >= 0, not {self.still}")
+
+
+#: the escape a robot's policies plan with when none is given, chosen on validation
+#: problems of 3D-Boxes (``scripts/stall_escape.py``); robots not named here plan without
+ESCAPE_DEFAULTS: dict[str, Escape] = {"sshape": Escape(steps=10, noise=2.0, still=0.01)}
 
 
 #: ``info["end"]`` of the compiled rollout's end codes (``_policy_kernels.END_*``)
@@ -268,6 +328,9 @@ class _Rollout:
     t_goal: float = 0.0
     #: the certified edge from ``q`` to the goal was found free (greedy goal connection)
     at_goal: bool = False
+    #: sampled steps of an escape (:class:`Escape`) still to come, and escapes so far
+    escape_left: int = 0
+    escapes: int = 0
 
 
 class PolicyPlanner:
@@ -296,6 +359,13 @@ class PolicyPlanner:
     start and goal, so a problem gets the same attempts in any order. Static scenes only
     (a rollout in a moving scene cannot start over).
 
+    ``escape`` (an :class:`Escape`, or its number of steps): where a step left the robot
+    where it was, sample the next few actions from a wider spread, then go back to the
+    mean action; within the one rollout, so in moving scenes too (``info["escapes"]``:
+    how many times). ``None``: the robot's default (:data:`ESCAPE_DEFAULTS`: on for the
+    S-shape, whose cloned policies pin themselves against obstacles; off for the others,
+    where validation showed no change).
+
     A PointNet actor is copied to numpy when the planner is made (later changes to the
     policy's weights are not seen; make a new planner). Scenes with moving obstacles and
     image observations go through ``rollout_batch`` (PyTorch on one thread), which runs to
@@ -320,6 +390,7 @@ class PolicyPlanner:
         compiled: bool = True,
         attempts: int = 1,
         action_noise: float = 1.0,
+        escape: Escape | int | None = None,
     ) -> None:
         from ..models.policy import Policy
 
@@ -348,6 +419,13 @@ class PolicyPlanner:
             raise ValueError(f"action_noise must be a finite number >= 0, not {action_noise}")
         self.attempts = int(attempts)
         self.action_noise = float(action_noise)
+        if escape is None:
+            escape = ESCAPE_DEFAULTS.get(self.robot.name, Escape(steps=0))
+        elif not isinstance(escape, Escape):
+            escape = Escape(steps=escape)
+        self.escape: Escape = escape
+        #: the draws of the escapes of the rollout being planned (seeded per problem)
+        self._escape_rng: np.random.Generator | None = None
         #: the action noise of the attempt being rolled out (None: the mean action)
         self._noise_rng: np.random.Generator | None = None
         #: the network as numpy arrays (weights as of now), or None: PyTorch on one thread
@@ -370,19 +448,25 @@ class PolicyPlanner:
     def plan(self, problem: Problem) -> PlanResult:
         if self.attempts > 1 and problem.scene.dynamic:
             raise ValueError("attempts > 1 plans static scenes only: a rollout among moving obstacles cannot start over")
-        res = self._plan_mean(problem)
+        key = zlib.crc32(np.ascontiguousarray(problem.start, np.float64).tobytes() + np.ascontiguousarray(problem.goal, np.float64).tobytes())
+        try:
+            self._escape_rng = np.random.default_rng(np.random.SeedSequence([self.seed, 0, key, 0x657363]))
+            res = self._plan_mean(problem)
+        finally:
+            self._escape_rng = None
         if res.success or self.attempts == 1:
             return res
         tried = [res]
         try:
             for k in range(1, self.attempts):
-                key = zlib.crc32(np.ascontiguousarray(problem.start, np.float64).tobytes() + np.ascontiguousarray(problem.goal, np.float64).tobytes())
                 self._noise_rng = np.random.default_rng(np.random.SeedSequence([self.seed, k, key]))
+                self._escape_rng = self._noise_rng
                 tried.append(self._plan_sampled(problem))
                 if tried[-1].success:
                     break
         finally:
             self._noise_rng = None
+            self._escape_rng = None
         last = tried[-1]
         pick = last if last.success else min(tried, key=lambda r: float(self.robot.distance(r.path[-1], problem.goal)))
         out = PlanResult(
@@ -405,14 +489,21 @@ class PolicyPlanner:
             return self._rollout_one(problem)
         rng = self._noise_rng
         assert rng is not None
-        dim = self.policy.actor.action_dim
-
-        def act(obs: np.ndarray, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
-            return self.policy(obs, q, goal, noise=self.action_noise * rng.standard_normal((len(q), dim)))
-
         with torch_threads(1):
             greedy = self.greedy_goal and not problem.scene.dynamic
-            return rollout_batch(act, self.robot, self.env, [problem], self.horizon, self.seed, connect_goal=self.connect_goal, greedy_goal=greedy)[0]
+            return rollout_batch(
+                self.policy,
+                self.robot,
+                self.env,
+                [problem],
+                self.horizon,
+                self.seed,
+                connect_goal=self.connect_goal,
+                greedy_goal=greedy,
+                escape=self.escape,
+                noise=self.action_noise,
+                noise_rng=rng,
+            )[0]
 
     def _plan_mean(self, problem: Problem) -> PlanResult:
         """The mean-action rollout."""
@@ -422,7 +513,7 @@ class PolicyPlanner:
             return self._plan_batched(problem)
         if self._observer is None:
             self._make_observer()
-        if self._kernel_args is not None:
+        if self._kernel_args is not None and self.escape.steps == 0:
             res = self._rollout_compiled(problem)
             if res is not None:
                 return res
@@ -456,14 +547,28 @@ class PolicyPlanner:
         scenes only: among moving obstacles an edge free now may not be free later)."""
         greedy = self.greedy_goal and not problem.scene.dynamic
         with torch_threads(1):
-            res = rollout_batch(self.policy, self.robot, self.env, [problem], self.horizon, self.seed, connect_goal=self.connect_goal, greedy_goal=greedy)[0]
+            res = rollout_batch(
+                self.policy,
+                self.robot,
+                self.env,
+                [problem],
+                self.horizon,
+                self.seed,
+                connect_goal=self.connect_goal,
+                greedy_goal=greedy,
+                escape=self.escape,
+                noise_rng=self._escape_rng,
+            )[0]
         return res
 
-    def _act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    def _act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray, escaping: bool = False) -> np.ndarray:
         from ..models.inputs import goal_input, obs_input
 
         noise = None
-        if self._noise_rng is not None:
+        if escaping:
+            assert self._escape_rng is not None
+            noise = self.escape.noise * self._escape_rng.standard_normal(self.policy.actor.action_dim)
+        elif self._noise_rng is not None:
             noise = self.action_noise * self._noise_rng.standard_normal(self.policy.actor.action_dim)
         if self.fast is not None:
             return self.fast(obs_input(self.robot, obs[None])[0], goal_input(self.robot, q, goal), noise)
@@ -691,6 +796,8 @@ class PolicyPlanner:
         path = np.stack(r.path + [goal]) if r.at_goal else np.stack(r.path)
         res = PlanResult(path=path, success=r.success or r.at_goal, nodes=steps, collision_checks=r.checks, time_s=time.perf_counter() - t0)
         res.info["time_split"] = {"observe": r.t_obs, "network": r.t_net, "motion": r.t_motion, "goal": r.t_goal, "steps": steps}
+        if self.escape.steps > 0:
+            res.info["escapes"] = r.escapes
         if r.at_goal:
             res.info["end"], res.info["goal_connection"], res.info["greedy_goal"] = "goal", "free", True
             return res
@@ -721,6 +828,7 @@ class PolicyPlanner:
         twists: list[np.ndarray] = []
         dists: list[float] = []
         qq, t = r.q, r.t
+        left = r.escape_left
         for s in range(t, self.horizon):
             if tester is not None:
                 tg = time.perf_counter()
@@ -734,17 +842,19 @@ class PolicyPlanner:
                         return qs, twists, dists
                     break  # confirm the moves up to here first
             u = self._uniforms((s + 1) * blk)[s * blk : (s + 1) * blk]
+            escaping = left > 0
+            left -= escaping
             ta = time.perf_counter()
-            if lean is not None:  # observation and network in one (timed as network)
+            if lean is not None and not escaping:  # observation and network in one (timed as network)
                 tb = ta
                 a = lean(qq, goal, u) if k_draws == 1 else np.mean([lean(qq, goal, u[j * per_step : (j + 1) * per_step]) for j in range(k_draws)], 0)
             elif k_draws == 1:
                 obs = observer.observe_one(qq, u=u)
                 tb = time.perf_counter()
-                a = self._act(obs, qq, goal)
+                a = self._act(obs, qq, goal, escaping)
             else:  # observing and acting interleaved: timed as network
                 tb = ta
-                a = np.mean([self._act(observer.observe_one(qq, u=u[j * per_step : (j + 1) * per_step]), qq, goal) for j in range(k_draws)], 0)
+                a = np.mean([self._act(observer.observe_one(qq, u=u[j * per_step : (j + 1) * per_step]), qq, goal, escaping) for j in range(k_draws)], 0)
             tc = time.perf_counter()
             tw = np.clip(a, -1.0, 1.0) * scale  # float64, as the env computes it
             qq = _free_move_end(robot, qq, tw, scene.low, scene.high, clip_target)
@@ -772,9 +882,12 @@ class PolicyPlanner:
         low, high = np.repeat(scene.low[None], k, 0), np.repeat(scene.high[None], k, 0)
         new_q, collided, n = q_free(robot, scene.world, np.stack(qs[:-1]), np.stack(twists), low, high, env.substep, clip_target=env.bounds == "clip")
         r.t_motion += time.perf_counter() - tc
+        esc = self.escape
         for j in range(k):
+            before = r.q
             r.q = new_q[j]
             r.path.append(r.q)
+            r.escape_left = max(r.escape_left - 1, 0)
             r.checks += int(n[j])
             r.t += 1
             agrees = not collided[j] and np.array_equal(r.q, qs[j + 1])
@@ -785,6 +898,10 @@ class PolicyPlanner:
             if stall is not None and r.t >= stall and float(robot.distance(r.q, r.path[r.t - stall])) < stall_r:
                 r.end = "stalled"
                 return
+            if esc.steps > 0 and r.escape_left == 0 and float(robot.distance(r.q, before)) < esc.still:
+                r.escape_left = esc.steps  # stuck: the next steps are sampled (run ahead again)
+                r.escapes += 1
+                return
             if not agrees:
                 return  # the run ahead went elsewhere from here: run again from r.q
 
@@ -793,4 +910,4 @@ class PolicyPlanner:
         ``observer_wrapper``, ``draws > 1`` or ``attempts > 1``)."""
         if self.observer_wrapper is not None or self.draws > 1 or self.attempts > 1:
             return [self.plan(p) for p in problems]
-        return rollout_batch(self.policy, self.robot, self.env, problems, self.horizon, self.seed, connect_goal=self.connect_goal)
+        return rollout_batch(self.policy, self.robot, self.env, problems, self.horizon, self.seed, connect_goal=self.connect_goal, escape=self.escape)
