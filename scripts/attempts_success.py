@@ -31,6 +31,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--attempts", type=int, nargs="+", default=[1, 2, 4, 8])
     ap.add_argument("--action-noise", type=float, default=1.0)
+    ap.add_argument("--escape", type=int, default=None, help="sampled steps after a stall (default: the planner's for the robot; 0: off)")
     ap.add_argument("--json", help="write the rows here")
     args = ap.parse_args()
     if any(k < 1 for k in args.attempts):
@@ -47,7 +48,7 @@ def main() -> None:
     problems = scenario.problems(args.split, args.episodes, seed=args.seed)
     rows = []
     for k in args.attempts:
-        planner = PolicyPlanner(policy, robot=scenario.robot, attempts=k, action_noise=args.action_noise)
+        planner = PolicyPlanner(policy, robot=scenario.robot, attempts=k, action_noise=args.action_noise, escape=args.escape)
         rep = evaluate(planner, problems, scenario.robot, progress=False)
         m = rep.metrics()
         row = {
@@ -67,7 +68,11 @@ def main() -> None:
         )
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"checkpoint": ckpt, "split": args.split, "episodes": args.episodes, "action_noise": args.action_noise, "rows": rows}, f, indent=1)
+            json.dump(
+                {"checkpoint": ckpt, "escape": args.escape, "split": args.split, "episodes": args.episodes, "action_noise": args.action_noise, "rows": rows},
+                f,
+                indent=1,
+            )
 
 
 if __name__ == "__main__":

@@ -11,7 +11,12 @@ does as well inside a single rollout:
     python scripts/stall_escape.py --robot sshape --observation local --env dynamic3d
 
 ``--escape 0`` is the plain mean-action rollout (with the greedy goal test in static
-scenes, as the planner does). Every path is re-checked by the evaluator.
+scenes, as the planner does). Every path is re-checked by the evaluator. ``--why`` then
+plans the same problems with the planner itself (``PolicyPlanner``, its default escape
+for the robot unless ``--escape`` names one value) and says how its failures end: how
+they stop, how many escapes they went through, how far from the goal they are left:
+
+    python scripts/stall_escape.py --robot sshape --observation global --escape 10 --noise 2 --why
 """
 
 from __future__ import annotations
@@ -65,6 +70,33 @@ class StallEscapePlanner:
         return rollout_batch(act, self.robot, self.env, [problem], self.horizon, self.seed, connect_goal=True, greedy_goal=greedy)[0]
 
 
+def why(policy: Any, scenario: Any, problems: list, args: argparse.Namespace) -> None:
+    """How the planner's failures end (``info["end"]``, escapes, distance left)."""
+    from collections import Counter
+
+    from pointplan.evaluation.evaluate import check_path
+    from pointplan.planners.policy import Escape, PolicyPlanner
+
+    escape = Escape(steps=args.escape[0], noise=args.noise, still=args.still) if len(args.escape) == 1 else None
+    planner = PolicyPlanner(policy, robot=scenario.robot, escape=escape)
+    ends: Counter[str] = Counter()
+    escapes, left, sent = [], [], []
+    for p in problems:
+        r = planner.plan(p)
+        if bool(check_path(scenario.robot, p, r.path)):
+            continue
+        ends[str(r.info.get("end"))] += 1
+        escapes.append(int(r.info.get("escapes", 0)))
+        left.append(float(scenario.robot.distance(r.path[-1], p.goal)))
+        sent.append(float(scenario.robot.distance(p.start, p.goal)))
+    print(f"planner {planner.escape}: {len(escapes)} failures of {len(problems)}; ends {dict(ends)}")
+    if escapes:
+        print(
+            f"escapes per failure: median {np.median(escapes):.0f} (10-90%: {np.percentile(escapes, 10):.0f}-{np.percentile(escapes, 90):.0f}); "
+            f"left from the goal: median {np.median(left):.2f} of {np.median(sent):.2f} at the start"
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("checkpoint", nargs="?", help="policy checkpoint (default: the shipped one)")
@@ -78,6 +110,7 @@ def main() -> None:
     ap.add_argument("--still", type=float, default=0.01, help="a step that moves less than this is a stall")
     ap.add_argument("--noise", type=float, default=1.0, help="scale of the policy's spread while escaping")
     ap.add_argument("--json", help="write the rows here")
+    ap.add_argument("--why", action="store_true", help="then: how the planner's failures end")
     args = ap.parse_args()
     torch.set_num_threads(1)
     from pointplan.evaluation.evaluate import evaluate
@@ -109,6 +142,8 @@ def main() -> None:
             f"{row['claims_disagree']} claims disagree, {row['wall_s']:.0f} s",
             flush=True,
         )
+    if args.why:
+        why(policy, scenario, problems, args)
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"checkpoint": ckpt, "split": args.split, "episodes": args.episodes, "still": args.still, "noise": args.noise, "rows": rows}, f, indent=1)
