@@ -9,10 +9,11 @@ of ``pointplan eval``); ``--table-only`` reads them back. Policies come from the
 (``--checkpoint-global`` / ``--checkpoint-local`` evaluate other files). With
 ``--attempts K`` the policy planners retry failed rollouts with sampled actions
 (``pointplan eval --attempts``); their cells are named ``policy-local-xK`` and skip the
-moving scene, where a rollout cannot start over. With ``--escape K`` a rollout samples K
-actions wherever a step left the robot where it was (``pointplan eval --escape``); cells
-``policy-local-escK``, in every scene. Without it the policies plan with the mean action
-throughout, whatever the planner's default for the robot.
+moving scene, where a rollout cannot start over. With ``--escape K`` a rollout takes K
+steps of the robot's escape wherever it is stuck (``pointplan eval --escape``): sampled
+actions for the S-shape (cells ``policy-local-escK``), steps toward a random subgoal for
+the sphere (cells ``policy-local-subK``), in every scene. Without it the policies plan
+with the mean action throughout, whatever the planner's default for the robot.
 """
 
 from __future__ import annotations
@@ -59,7 +60,8 @@ def run(args: argparse.Namespace) -> None:
                     "policy", scenario.robot, checkpoint=getattr(args, f"checkpoint_{obs}"), observation=obs, attempts=args.attempts, escape=args.escape
                 )
                 if args.escape > 0:
-                    planner_name = f"{planner_name}-esc{args.escape}"
+                    kind = "sub" if planner.escape.subgoal else "esc"  # type: ignore[attr-defined]
+                    planner_name = f"{planner_name}-{kind}{args.escape}"
                 if args.attempts > 1:
                     planner_name = f"{planner_name}-x{args.attempts}"
             else:
@@ -79,9 +81,9 @@ def table(robot: str) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
 
-    def order(name: str) -> tuple[str, int, int]:  # policy-OBS[-escK][-xK]: by observation, escape, attempts
+    def order(name: str) -> tuple[str, int, int]:  # policy-OBS[-escK|-subK][-xK]: by observation, escape, attempts
         parts = name.split("-")[2:]
-        esc = next((int(p[3:]) for p in parts if p.startswith("esc")), 0)
+        esc = next((int(p[3:]) for p in parts if p.startswith(("esc", "sub"))), 0)
         att = next((int(p[1:]) for p in parts if p.startswith("x")), 1)
         return name.split("-")[1], esc, att
 
@@ -117,7 +119,7 @@ def main() -> None:
         "--escape",
         type=int,
         default=0,
-        help="policy planners: after a step that left the robot where it was, this many sampled steps (cells named policy-OBS-escK; default: 0, the mean action throughout)",
+        help="policy planners: where the robot is stuck, this many steps of the robot's escape (cells named policy-OBS-escK, or -subK where it heads for a subgoal; default: 0, the mean action throughout)",
     )
     ap.add_argument("--table-only", action="store_true")
     ap.add_argument("--quiet", action="store_true")

@@ -245,7 +245,7 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument(
         "--escape",
         type=non_negative_int,
-        help="--planner policy or hybrid: after a step that leaves the robot where it was (pressed against an obstacle), sample this many actions from twice the policy's spread, then the mean action again; 0 turns it off (default: 10 for the S-shape, chosen on validation; 0 for the other robots)",
+        help="--planner policy or hybrid: where the robot is stuck, this many steps of the robot's escape, then the mean action toward the goal again; 0 turns it off (default: 10 for the S-shape, which samples from twice the policy's spread after a step that did not move it, and for the sphere, which heads for a random subgoal after 6 steps that ended within 0.1 of where they started; both chosen on validation; 0 for the disc)",
     )
     p.add_argument("--seed", type=non_negative_int, default=0, help="problem-set seed, 0 or more (default: %(default)s)")
 

@@ -141,6 +141,7 @@ def rollout_batch(
     escape: Escape | None = None,
     noise: float = 0.0,
     noise_rng: np.random.Generator | None = None,
+    crush_ends: bool = True,
 ) -> list[PlanResult]:
     """Roll ``act(obs, q, goal) -> actions`` out on every problem, ``chunk`` at a time.
     The time of a chunk is shared equally by its problems. With ``connect_goal`` each
@@ -152,10 +153,15 @@ def rollout_batch(
 
     ``noise > 0`` samples every action, ``act(obs, q, goal, noise=s * N(0, 1))`` with
     ``s = noise``; an ``escape`` (:class:`Escape`) samples the next ``escape.steps``
-    actions of a problem with ``s = escape.noise`` wherever a step moved its robot less
-    than ``escape.still``. Both need an ``act`` that takes ``noise`` (a
+    actions of a problem with ``s = escape.noise`` wherever its robot ended a step less
+    than ``escape.still`` from where it was ``escape.window`` steps before. Both need an ``act`` that takes ``noise`` (a
     :class:`~pointplan.models.policy.Policy` does) and draw from ``noise_rng`` (default:
-    seeded by ``seed`` and the chunk)."""
+    seeded by ``seed`` and the chunk).
+
+    ``crush_ends=False`` is for comparisons only: a moving obstacle that runs into the
+    robot no longer ends its rollout (the robot stays where it is until it can move
+    again), so a success may have touched an obstacle; ``info["crushed"]`` counts the
+    steps it was hit. The planner never plans so."""
     if greedy_goal and any(p.scene.dynamic for p in problems):
         raise ValueError("greedy_goal connects to the goal in static scenes only")
     escaping_on = escape is not None and escape.steps > 0
@@ -176,11 +182,13 @@ def rollout_batch(
         active = np.ones(n, bool)
         success = np.zeros(n, bool)
         crushed = np.zeros(n, bool)
+        hits = np.zeros(n, np.int64)
         at_goal = np.zeros(n, bool)
         nrng = noise_rng if noise_rng is not None else np.random.default_rng(np.random.SeedSequence([seed, c0, 0x6E6F6973]))
         left = np.zeros(n, np.int64)  # sampled steps of an escape still to come, per problem
         escapes = np.zeros(n, np.int64)
-        prev = core.q.copy()
+        subgoals = core.goal.copy()  # where an escape toward a subgoal heads, per problem
+        toward_subgoal = escaping_on and escape is not None and escape.subgoal
 
         def try_goal(which: np.ndarray) -> None:
             for i in np.flatnonzero(which):
@@ -200,24 +208,27 @@ def rollout_batch(
                 esc = left > 0
                 scale = np.where(esc, escape.noise if escape is not None else 0.0, noise)
                 draw = nrng.standard_normal((n, len(robot.action_scale)))
-                a = np.asarray(act(obs, core.q.copy(), core.goal.copy(), noise=scale[:, None] * draw), np.float32)  # type: ignore[call-arg]
+                goal_in = np.where(esc[:, None], subgoals, core.goal) if toward_subgoal else core.goal.copy()
+                a = np.asarray(act(obs, core.q.copy(), goal_in, noise=scale[:, None] * draw), np.float32)  # type: ignore[call-arg]
                 left[esc] -= 1
             else:
                 a = np.asarray(act(obs, core.q.copy(), core.goal.copy()), np.float32)
             a[~active] = 0.0  # finished problems stand still
             _, term, _, info = core.step(a)
-            if escaping_on:
-                assert escape is not None
-                stuck = active & (left == 0) & (np.asarray(robot.distance(core.q, prev)) < escape.still)
+            paths[t + 1] = core.q
+            if escape is not None and escaping_on and t + 1 >= escape.window:
+                stuck = active & (left == 0) & (np.asarray(robot.distance(core.q, paths[t + 1 - escape.window])) < escape.still)
                 left[stuck] = escape.steps
                 escapes += stuck
-                prev = core.q.copy()
-            paths[t + 1] = core.q
+                if toward_subgoal:
+                    for j in np.flatnonzero(stuck).tolist():
+                        subgoals[j] = robot.sample_uniform(nrng, 1, probs[j].scene.low, probs[j].scene.high)[0]
             length += active
             checks += np.where(active, info["collision_checks"], 0)
             success |= term & active
             crushed |= info["crushed"] & active
-            active &= ~(term | info["crushed"])  # a moving obstacle that hits the robot ends it
+            hits += info["crushed"] & active
+            active &= ~(term | (info["crushed"] & crush_ends))  # a moving obstacle that hits the robot ends it
             if not active.any():
                 break
         if greedy_goal:  # where the rollouts that did not arrive stopped
@@ -234,8 +245,10 @@ def rollout_batch(
                 results.append(res)
                 continue
             res = PlanResult(path=paths[:k, i].copy(), success=bool(success[i]), nodes=k - 1, collision_checks=int(checks[i]), time_s=dt)
-            if crushed[i]:
+            if crushed[i] and crush_ends:
                 res.info["end"] = "crushed"
+            if not crush_ends:
+                res.info["crushed"] = int(hits[i])
             if escaping_on:
                 res.info["escapes"] = int(escapes[i])
             if connect_goal:
@@ -246,16 +259,26 @@ def rollout_batch(
 
 @dataclass(frozen=True)
 class Escape:
-    """Noise switched on where a rollout is stuck: after a step that moved the robot less
-    than ``still`` (geodesic distance), the next ``steps`` actions are sampled as
-    ``tanh(mean + noise * std * N(0, 1))``, then the mean action again (``steps = 0``: off).
-    The cloned S-shape policies mostly fail by pressing against an obstacle with the same
-    mean action until the horizon; a few sampled steps free them within the one rollout
-    (``docs/learning.md``, "Escaping a stall")."""
+    """Noise switched on where a rollout is stuck: after a step that left the robot less
+    than ``still`` (geodesic distance) from where it was ``window`` steps before, the next
+    ``steps`` actions are sampled as ``tanh(mean + noise * std * N(0, 1))``, then the mean
+    action again (``steps = 0``: off). The cloned S-shape policies mostly fail by pressing
+    against an obstacle with the same mean action until the horizon (``window = 1``: one
+    step that did not move); the sphere's by dithering back and forth in one place, which
+    a longer window sees. A few sampled steps free them within the one rollout
+    (``docs/learning.md``, "Escaping a stall").
+
+    ``subgoal``: during an escape the policy is steered toward a configuration drawn
+    uniformly in the scene's bounds instead of the goal (with ``noise = 0``, its mean
+    action toward it): a goal-conditioned policy walks off in a random direction while
+    avoiding obstacles, where noise alone jitters about the trap (randomised escape from
+    a local minimum, as in potential-field planners)."""
 
     steps: int = 10
     noise: float = 2.0
     still: float = 0.01
+    window: int = 1
+    subgoal: bool = False
 
     def __post_init__(self) -> None:
         if int(self.steps) != self.steps or self.steps < 0:
@@ -264,11 +287,19 @@ class Escape:
             raise ValueError(f"escape noise must be a finite number >= 0, not {self.noise}")
         if not np.isfinite(self.still) or self.still < 0:
             raise ValueError(f"escape still must be a finite number >= 0, not {self.still}")
+        if int(self.window) != self.window or self.window < 1:
+            raise ValueError(f"escape window must be an integer >= 1, not {self.window}")
 
 
 #: the escape a robot's policies plan with when none is given, chosen on validation
-#: problems of 3D-Boxes (``scripts/stall_escape.py``); robots not named here plan without
-ESCAPE_DEFAULTS: dict[str, Escape] = {"sshape": Escape(steps=10, noise=2.0, still=0.01)}
+#: problems (``scripts/stall_escape.py``; docs/learning.md, "Escaping a stall"): the
+#: S-shape presses against an obstacle, so one still step starts ten sampled ones; the
+#: sphere dithers in one place, so six steps that end within 0.1 of where they started
+#: start ten toward a random subgoal. Robots not named here plan without.
+ESCAPE_DEFAULTS: dict[str, Escape] = {
+    "sshape": Escape(steps=10, noise=2.0, still=0.01),
+    "sphere3d": Escape(steps=10, noise=0.0, still=0.1, window=6, subgoal=True),
+}
 
 
 #: ``info["end"]`` of the compiled rollout's end codes (``_policy_kernels.END_*``)
@@ -331,6 +362,8 @@ class _Rollout:
     #: sampled steps of an escape (:class:`Escape`) still to come, and escapes so far
     escape_left: int = 0
     escapes: int = 0
+    #: where the current escape heads (``Escape.subgoal``; ``None``: the goal)
+    subgoal: np.ndarray | None = None
 
 
 class PolicyPlanner:
@@ -359,12 +392,13 @@ class PolicyPlanner:
     start and goal, so a problem gets the same attempts in any order. Static scenes only
     (a rollout in a moving scene cannot start over).
 
-    ``escape`` (an :class:`Escape`, or its number of steps): where a step left the robot
-    where it was, sample the next few actions from a wider spread, then go back to the
-    mean action; within the one rollout, so in moving scenes too (``info["escapes"]``:
-    how many times). ``None``: the robot's default (:data:`ESCAPE_DEFAULTS`: on for the
-    S-shape, whose cloned policies pin themselves against obstacles; off for the others,
-    where validation showed no change).
+    ``escape`` (an :class:`Escape`, or its number of steps with the rest of the robot's
+    default): where the robot is stuck, take the next few actions from a wider spread or
+    toward a random subgoal, then go back to the mean action toward the goal; within the
+    one rollout, so in moving scenes too (``info["escapes"]``: how many times). ``None``:
+    the robot's default (:data:`ESCAPE_DEFAULTS`: the S-shape, whose cloned policies pin
+    themselves against obstacles, samples wider; the sphere, whose policies dither in one
+    place, heads for a subgoal; off for the disc, where validation showed no change).
 
     A PointNet actor is copied to numpy when the planner is made (later changes to the
     policy's weights are not seen; make a new planner). Scenes with moving obstacles and
@@ -421,8 +455,8 @@ class PolicyPlanner:
         self.action_noise = float(action_noise)
         if escape is None:
             escape = ESCAPE_DEFAULTS.get(self.robot.name, Escape(steps=0))
-        elif not isinstance(escape, Escape):
-            escape = Escape(steps=escape)
+        elif not isinstance(escape, Escape):  # a number of steps: the robot's own kind of escape
+            escape = replace(ESCAPE_DEFAULTS.get(self.robot.name, Escape()), steps=escape)
         self.escape: Escape = escape
         #: the draws of the escapes of the rollout being planned (seeded per problem)
         self._escape_rng: np.random.Generator | None = None
@@ -851,10 +885,11 @@ class PolicyPlanner:
             elif k_draws == 1:
                 obs = observer.observe_one(qq, u=u)
                 tb = time.perf_counter()
-                a = self._act(obs, qq, goal, escaping)
+                a = self._act(obs, qq, r.subgoal if escaping and r.subgoal is not None else goal, escaping)
             else:  # observing and acting interleaved: timed as network
                 tb = ta
-                a = np.mean([self._act(observer.observe_one(qq, u=u[j * per_step : (j + 1) * per_step]), qq, goal, escaping) for j in range(k_draws)], 0)
+                toward = r.subgoal if escaping and r.subgoal is not None else goal
+                a = np.mean([self._act(observer.observe_one(qq, u=u[j * per_step : (j + 1) * per_step]), qq, toward, escaping) for j in range(k_draws)], 0)
             tc = time.perf_counter()
             tw = np.clip(a, -1.0, 1.0) * scale  # float64, as the env computes it
             qq = _free_move_end(robot, qq, tw, scene.low, scene.high, clip_target)
@@ -884,7 +919,6 @@ class PolicyPlanner:
         r.t_motion += time.perf_counter() - tc
         esc = self.escape
         for j in range(k):
-            before = r.q
             r.q = new_q[j]
             r.path.append(r.q)
             r.escape_left = max(r.escape_left - 1, 0)
@@ -898,9 +932,12 @@ class PolicyPlanner:
             if stall is not None and r.t >= stall and float(robot.distance(r.q, r.path[r.t - stall])) < stall_r:
                 r.end = "stalled"
                 return
-            if esc.steps > 0 and r.escape_left == 0 and float(robot.distance(r.q, before)) < esc.still:
+            if esc.steps > 0 and r.escape_left == 0 and r.t >= esc.window and float(robot.distance(r.q, r.path[r.t - esc.window])) < esc.still:
                 r.escape_left = esc.steps  # stuck: the next steps are sampled (run ahead again)
                 r.escapes += 1
+                if esc.subgoal:
+                    assert self._escape_rng is not None
+                    r.subgoal = robot.sample_uniform(self._escape_rng, 1, scene.low, scene.high)[0]
                 return
             if not agrees:
                 return  # the run ahead went elsewhere from here: run again from r.q
