@@ -37,7 +37,9 @@ class StallEscapePlanner:
 
     name = "policy-escape"
 
-    def __init__(self, policy: Any, robot: Any, escape: int, still: float, noise: float, seed: int = 0) -> None:
+    def __init__(
+        self, policy: Any, robot: Any, escape: int, still: float, noise: float, seed: int = 0, grow_noise: float = 0.0, grow_steps: float = 0.0
+    ) -> None:
         from pointplan.envs.core import EnvConfig
 
         self.policy, self.robot = policy, robot
@@ -45,25 +47,28 @@ class StallEscapePlanner:
         self.env = EnvConfig(observation=policy.observation, n_points=policy.n_points)
         self.horizon = int(policy.meta.get("horizon") or 50)
         self.escapes = 0  # how many escape phases were started, over all problems
+        # the k-th escape of a problem: noise * (1 + grow_noise * (k - 1)) for escape * (1 + grow_steps * (k - 1)) steps
+        self.grow_noise, self.grow_steps = float(grow_noise), float(grow_steps)
 
     def plan(self, problem: Any) -> Any:
         from pointplan.planners.policy import rollout_batch
 
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, int(1e6 * float(problem.start[0])) % (2**31)]))
         dim = self.policy.actor.action_dim
-        state: dict[str, Any] = {"prev": None, "left": 0}
+        state: dict[str, Any] = {"prev": None, "left": 0, "k": 0}
 
         def act(obs: np.ndarray, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
             if state["prev"] is not None and self.escape > 0:
                 moved = float(self.robot.distance(q[0], state["prev"]))
                 if moved < self.still and state["left"] == 0:
-                    state["left"] = self.escape
+                    state["k"] += 1
+                    state["left"] = int(round(self.escape * (1 + self.grow_steps * (state["k"] - 1))))
                     self.escapes += 1
             state["prev"] = q[0].copy()
             noise = None
             if state["left"] > 0:
                 state["left"] -= 1
-                noise = self.noise * rng.standard_normal((len(q), dim))
+                noise = self.noise * (1 + self.grow_noise * (state["k"] - 1)) * rng.standard_normal((len(q), dim))
             return self.policy(obs, q, goal, noise=noise)
 
         greedy = not problem.scene.dynamic
@@ -111,6 +116,8 @@ def main() -> None:
     ap.add_argument("--noise", type=float, default=1.0, help="scale of the policy's spread while escaping")
     ap.add_argument("--json", help="write the rows here")
     ap.add_argument("--why", action="store_true", help="then: how the planner's failures end")
+    ap.add_argument("--grow-noise", type=float, default=0.0, help="the k-th escape of a problem samples with noise * (1 + this * (k - 1))")
+    ap.add_argument("--grow-steps", type=float, default=0.0, help="the k-th escape of a problem lasts escape * (1 + this * (k - 1)) steps")
     args = ap.parse_args()
     torch.set_num_threads(1)
     from pointplan.evaluation.evaluate import evaluate
@@ -123,7 +130,7 @@ def main() -> None:
     problems = scenario.problems(args.split, args.episodes, seed=args.seed)
     rows = []
     for m in args.escape:
-        planner = StallEscapePlanner(policy, scenario.robot, m, args.still, args.noise, args.seed)
+        planner = StallEscapePlanner(policy, scenario.robot, m, args.still, args.noise, args.seed, args.grow_noise, args.grow_steps)
         t0 = time.perf_counter()
         rep = evaluate(planner, problems, scenario.robot, progress=False)
         met = rep.metrics()
