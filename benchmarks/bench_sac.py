@@ -2,6 +2,7 @@
 
     python benchmarks/bench_sac.py            # ~5 s per configuration
     python benchmarks/bench_sac.py --quick
+    python benchmarks/bench_sac.py --image    # the Table 1 CNN cell, channels-last against the default layout
 
 Updates use batches of 256 transitions of 64 points x 4 features (2D-Narrow observations
 from the environment), HER relabelling included. Run it on an otherwise idle machine:
@@ -64,12 +65,64 @@ def filled_buffer(rng: np.random.Generator, episodes: int = 40) -> EpisodeReplay
     return buf
 
 
+def image_buffer(rng: np.random.Generator, episodes: int = 16) -> EpisodeReplay:
+    """Episodes of random actions in 2D-Narrow with 64 x 64 occupancy images."""
+    scenario = Narrow2DScenario()
+    core = BatchedCore(scenario, 8, EnvConfig(observation="image"))
+    buf = EpisodeReplay(episodes * 50 + 100, (1, 64, 64), 2, 2)
+    for _ in range(episodes // 8):
+        core.reset_envs(range(8), rng)
+        obs, q, qn, a, col = [], [], [], [], []
+        for _ in range(50):
+            obs.append(core.observe(rng)["observation"])
+            q.append(core.q.copy())
+            act = rng.uniform(-1, 1, (8, 2)).astype(np.float32)
+            _, _, _, info = core.step(act)
+            qn.append(core.q.copy())
+            a.append(act)
+            col.append(info["collided"])
+        obs_a, q_a, qn_a, a_a, col_a = np.stack(obs, 1), np.stack(q, 1), np.stack(qn, 1), np.stack(a, 1), np.stack(col, 1)
+        for i in range(8):
+            buf.add_episode(obs_a[i], obs_a[i], q_a[i], qn_a[i], np.broadcast_to(core.goal[i], (50, 2)), a_a[i], np.linalg.norm(a_a[i], axis=1), col_a[i])
+    return buf
+
+
+def bench_image(duration: float, device: str) -> None:
+    """SAC updates of the Table 1 image / CNN cell (3 x 64 heads, shared CNN, batches of
+    256) with the CNN channels-last, as it ships, and converted back to the default layout."""
+    rng = np.random.default_rng(0)
+    buf = image_buffer(rng)
+    robot = Narrow2DScenario().robot
+    net = NetConfig(EncoderConfig("cnn", 64, 3), head_width=64, head_layers=3, critic_action="pooled", shared_encoder=True)
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {device}")
+    rates = {}
+    for layout in ("channels-last (shipped)", "default layout"):
+        torch.manual_seed(0)
+        sac = SAC(robot, EnvConfig(observation="image"), (1, 64, 64), net, SACConfig(), device=device)
+        if layout == "default layout":
+            for m in (m for part in (sac.actor, sac.critic, sac.critic_target, sac.actor_avg) if part is not None for m in part.modules()):
+                if isinstance(m, torch.nn.Conv2d):
+                    m.to(memory_format=torch.contiguous_format)  # type: ignore[call-overload]
+        sac.update(buf.sample(256, rng))
+        n, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < duration:
+            sac.update(buf.sample(256, rng))
+            n += 1
+        rates[layout] = n / (time.perf_counter() - t0)
+        print(f"image / CNN, {layout:24s} {rates[layout]:6.2f} updates/s")
+    print(f"channels-last: {rates['channels-last (shipped)'] / rates['default layout']:.2f}x the default layout")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--device", default="cpu")
+    ap.add_argument("--image", action="store_true", help="the Table 1 image / CNN cell instead")
     args = ap.parse_args()
     duration = 2.0 if args.quick else 5.0
+    if args.image:
+        bench_image(4 * duration, args.device)
+        return
     rng = np.random.default_rng(0)
     torch.manual_seed(0)
     buf = filled_buffer(rng)

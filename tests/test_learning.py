@@ -39,6 +39,40 @@ def test_pointnet_is_permutation_invariant() -> None:
     assert not torch.allclose(enc(x, extra), enc(y, extra))
 
 
+def test_cnn_encoder_computes_the_plain_convolutions_and_their_gradients() -> None:
+    """The CNN runs channels-last for speed; its features and its weights' gradients are
+    those of the same convolutions written out with ``torch.nn.functional`` in the
+    default layout, on a batch and on one image."""
+    import torch.nn.functional as F
+
+    from pointplan.models.encoders import CNNEncoder
+
+    torch.manual_seed(0)
+    enc = CNNEncoder(size=64, channels=8, extra=3)
+    convs = [m for m in enc.net if isinstance(m, torch.nn.Conv2d)]
+    assert all(c.weight.is_contiguous(memory_format=torch.channels_last) for c in convs)
+    ref_w = [(c.weight.detach().contiguous().clone().requires_grad_(), c.bias.detach().clone().requires_grad_()) for c in convs]  # type: ignore[union-attr]
+
+    def reference(img: torch.Tensor, extra: torch.Tensor) -> torch.Tensor:
+        h = img
+        for w, b in ref_w:
+            h = F.elu(F.conv2d(h, w, b, stride=2, padding=1))
+        return torch.cat([F.max_pool2d(h, 2).flatten(1), extra], -1)
+
+    for batch in (32, 1):
+        img, extra = torch.rand(batch, 1, 64, 64), torch.randn(batch, 3)
+        got, want = enc(img, extra), reference(img, extra)
+        assert got.shape == (batch, enc.features_dim)
+        torch.testing.assert_close(got, want, atol=1e-5, rtol=1e-5)
+    enc.zero_grad()
+    img = torch.rand(16, 1, 64, 64)
+    (enc(img) ** 2).sum().backward()
+    (reference(img, torch.zeros(16, 0)) ** 2).sum().backward()
+    for c, (w, b) in zip(convs, ref_w):
+        torch.testing.assert_close(c.weight.grad, w.grad, atol=1e-4, rtol=1e-4)
+        torch.testing.assert_close(c.bias.grad, b.grad, atol=1e-4, rtol=1e-4)
+
+
 @pytest.mark.parametrize("action_on", ["points", "pooled"])
 def test_networks_shapes(action_on: str) -> None:
     cfg = NetConfig(EncoderConfig(width=16, layers=2), head_width=16, head_layers=2, critic_action=action_on)
