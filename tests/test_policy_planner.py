@@ -375,6 +375,8 @@ def test_escape_in_a_moving_scene_and_bad_input() -> None:
     for bad in (dict(window=0), dict(window=1.5)):
         with pytest.raises(ValueError, match="escape window"):
             Escape(**bad)  # type: ignore[arg-type]
+    whole = Escape(steps=10.0, window=6.0)  # type: ignore[arg-type]
+    assert type(whole.steps) is int and type(whole.window) is int and whole == Escape(steps=10, window=6)
     sphere = PolicyPlanner(shipped_checkpoint("sphere3d", "local"))
     assert sphere.escape == Escape(steps=10, noise=0.0, still=0.1, window=6, subgoal=True)  # the sphere's default
     assert PolicyPlanner(shipped_checkpoint("sphere3d", "local"), escape=4).escape == Escape(4, 0.0, 0.1, 6, True)  # its kind, 4 steps

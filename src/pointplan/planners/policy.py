@@ -217,7 +217,8 @@ def rollout_batch(
             _, term, _, info = core.step(a)
             paths[t + 1] = core.q
             if escape is not None and escaping_on and t + 1 >= escape.window:
-                stuck = active & (left == 0) & (np.asarray(robot.distance(core.q, paths[t + 1 - escape.window])) < escape.still)
+                going_on = active & ~term & ~(info["crushed"] & crush_ends)  # not ended by this step
+                stuck = going_on & (left == 0) & (np.asarray(robot.distance(core.q, paths[t + 1 - escape.window])) < escape.still)
                 left[stuck] = escape.steps
                 escapes += stuck
                 if toward_subgoal:
@@ -242,6 +243,8 @@ def rollout_batch(
                 res.info.update({"end": "goal", "goal_connection": "free", "greedy_goal": True})
                 if escaping_on:
                     res.info["escapes"] = int(escapes[i])
+                if not crush_ends:
+                    res.info["crushed"] = int(hits[i])
                 results.append(res)
                 continue
             res = PlanResult(path=paths[:k, i].copy(), success=bool(success[i]), nodes=k - 1, collision_checks=int(checks[i]), time_s=dt)
@@ -289,6 +292,8 @@ class Escape:
             raise ValueError(f"escape still must be a finite number >= 0, not {self.still}")
         if int(self.window) != self.window or self.window < 1:
             raise ValueError(f"escape window must be an integer >= 1, not {self.window}")
+        object.__setattr__(self, "steps", int(self.steps))  # 6.0 -> 6: they index paths
+        object.__setattr__(self, "window", int(self.window))
 
 
 #: the escape a robot's policies plan with when none is given, chosen on validation
@@ -399,6 +404,9 @@ class PolicyPlanner:
     the robot's default (:data:`ESCAPE_DEFAULTS`: the S-shape, whose cloned policies pin
     themselves against obstacles, samples wider; the sphere, whose policies dither in one
     place, heads for a subgoal; off for the disc, where validation showed no change).
+    With an escape the compiled rollout is not used: the sphere's `global` policy then plans
+    in the numpy one-robot rollout, about twice the time per problem (7.7 against 3.7 ms
+    mean in 3D-Boxes, docs/results.md).
 
     A PointNet actor is copied to numpy when the planner is made (later changes to the
     policy's weights are not seen; make a new planner). Scenes with moving obstacles and
