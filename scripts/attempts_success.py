@@ -8,6 +8,10 @@ budget, on the validation split (for choosing the budget; the test split is for 
 
     python scripts/attempts_success.py checkpoints/sshape_local_bc_spread.pt --attempts 1 2 4 8
     python scripts/attempts_success.py --robot sphere3d --observation local --env ycb3d
+    python scripts/attempts_success.py runs/bc_slotwide_local/bc.pt --env slot --attempts 1 16
+
+In Slot (and its wide-slot stage ``slotwide``) success is also given per slot width, in
+bands of one bar thickness.
 
 Without a checkpoint the policy that ships for ``--robot`` and ``--observation`` is used.
 """
@@ -17,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 
+import numpy as np
 import torch
 
 
@@ -60,12 +65,21 @@ def main() -> None:
             "path_length": m["path_length_mean"],
             "claims_disagree": m["planner_claims_disagree"],
         }
+        widths = [p.scene.__dict__.get("slot", {}).get("width") for p in problems]
+        if all(w is not None for w in widths):
+            from pointplan.robots.sshape import BAR_THICKNESS
+
+            band = np.floor(np.asarray(widths) / BAR_THICKNESS).astype(int)
+            ok = np.array([r.success for r in rep.records])
+            row["by_width"] = {f"{b}-{b + 1} bars": [int(ok[band == b].sum()), int((band == b).sum())] for b in sorted(set(band.tolist()))}
         rows.append(row)
         print(
             f"attempts {k:2d}: {100 * row['success']:5.1f}% of {m['episodes']} {args.split} problems in {scenario.name}, "
             f"{row['mean_steps']:.1f} steps, {row['mean_checks']:.0f} checks, {1000 * row['time_s']:.0f} ms per problem, {row['claims_disagree']} claims disagree",
             flush=True,
         )
+        for name, (k_ok, k_n) in row.get("by_width", {}).items():
+            print(f"    {name}: {k_ok}/{k_n}", flush=True)
     if args.json:
         with open(args.json, "w") as f:
             json.dump(

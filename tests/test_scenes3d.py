@@ -124,6 +124,16 @@ def test_slot_width_and_sides() -> None:
         assert p.start[0] <= -0.3 and p.goal[0] >= 0.3
 
 
+def test_slotwide_draws_only_wide_slots_from_its_own_workspaces() -> None:
+    wide, slot = make_scenario("slotwide"), make_scenario("slot")
+    assert wide.robot.name == "sshape"
+    widths = [wide.scene("train", i).__dict__["slot"]["width"] for i in range(40)]
+    assert 4 * 0.036 <= min(widths) and max(widths) <= 8 * 0.036
+    assert max(widths) - min(widths) > 2 * 0.036  # the range is used, not one width
+    # its own stream: the same index is not Slot's workspace with another width
+    assert not np.allclose(wide.scene("train", 0).__dict__["slot"]["center"], slot.scene("train", 0).__dict__["slot"]["center"])
+
+
 def test_qureshi_sizes_are_permuted_at_fixed_centres() -> None:
     sc = make_scenario("qureshi3d")
     a, b = sc.scene("test", 0).obstacles, sc.scene("test", 1).obstacles
@@ -244,10 +254,10 @@ def test_local_rays_hit_surfaces_facing_the_rays(robot: str) -> None:
 
 @pytest.mark.parametrize("name", STATIC)
 def test_birrt_solves_fixed_problems_and_paths_pass_the_check(name: str) -> None:
-    robots = ["sshape"] if name == "slot" else ["sphere3d", "sshape"]
+    robots = ["sshape"] if name.startswith("slot") else ["sphere3d", "sshape"]
     for robot in robots:
         # Slot: the widest slot (8 bars) keeps the test fast; narrow ones take 1e4+ nodes
-        sc = SlotScenario(config=SlotConfig(min_width_bars=8, max_width_bars=8)) if name == "slot" else make_scenario(name, robot=robot)
+        sc = SlotScenario(config=SlotConfig(min_width_bars=8, max_width_bars=8)) if name.startswith("slot") else make_scenario(name, robot=robot)
         planner = make_planner("birrt", sc.robot, seed=0, max_nodes=20000)
         problems = sc.problems("test", 2)
         for p in problems:

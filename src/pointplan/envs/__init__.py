@@ -19,6 +19,7 @@ ENV_IDS = {
     "ycb3d": "pointplan/YCB3D-v0",
     "dynamic3d": "pointplan/Dynamic3D-v0",
     "slot": "pointplan/Slot-v0",
+    "slotwide": "pointplan/SlotWide-v0",
     "qureshi3d": "pointplan/Qureshi3D-v0",
 }
 
