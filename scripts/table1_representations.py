@@ -253,10 +253,11 @@ def main() -> int:
     ap.add_argument("--table", action="store_true", help="print the Markdown table of the cells in --out")
     ap.add_argument("--redo", action="store_true", help="run cells whose result is in --out already")
     ap.add_argument("--quiet", action="store_true")
+    ap.add_argument("--threads", type=int, default=1, help="PyTorch threads (1 when another job shares the cores)")
     args = ap.parse_args()
     out = Path(args.out)
     if args.method:
-        torch.set_num_threads(1)
+        torch.set_num_threads(max(1, args.threads))
         out.mkdir(parents=True, exist_ok=True)
         for cell in args.cells:
             done = out / f"{cell.replace(':', '_')}_{args.method}.json"

@@ -31,8 +31,9 @@ _CONTACT_MARGIN = 1e-5
 _BOUNDS_EPS = 1e-12
 _GRID_SLACK = 1e-9
 
-#: rollout ends (``rollout_ball``'s code)
-END_HORIZON, END_STALLED, END_GREEDY, END_TOL_GOAL, END_TOL_BLOCKED, END_TOL = 0, 1, 2, 3, 4, 5
+#: rollout ends (``rollout_ball``'s code); ``END_ESCAPE``: the robot is stuck by the
+#: escape's test (``I_ESC_WINDOW`` > 0), and the rollout is handed back to Python there
+END_HORIZON, END_STALLED, END_GREEDY, END_TOL_GOAL, END_TOL_BLOCKED, END_TOL, END_ESCAPE = 0, 1, 2, 3, 4, 5, 6
 
 _jit = numba.njit(cache=True, nogil=True)
 _jit_fast = numba.njit(cache=True, nogil=True, fastmath=True)
@@ -472,9 +473,9 @@ def _clip_twist(a, scale, tw):  # type: ignore[no-untyped-def]
 
 
 #: ``fparams`` of :func:`_rollout`
-F_RADIUS, F_SUBSTEP, F_GOAL_TOL, F_STALL_DIST, F_RESOLUTION, F_S32 = range(6)
+F_RADIUS, F_SUBSTEP, F_GOAL_TOL, F_STALL_DIST, F_RESOLUTION, F_S32, F_ESC_STILL = range(7)
 #: ``iparams`` of :func:`_rollout`
-I_HORIZON, I_STALL_STEPS, I_GREEDY, I_CONNECT, I_CLIP, I_N_POINTS, I_ACTION_DIM = range(7)
+I_HORIZON, I_STALL_STEPS, I_GREEDY, I_CONNECT, I_CLIP, I_N_POINTS, I_ACTION_DIM, I_ESC_WINDOW = range(8)
 
 
 @_jit
@@ -486,6 +487,7 @@ def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, 
     radius, substep, goal_tol = fparams[F_RADIUS], fparams[F_SUBSTEP], fparams[F_GOAL_TOL]
     stall_dist, resolution, s32 = fparams[F_STALL_DIST], fparams[F_RESOLUTION], fparams[F_S32]
     horizon, stall_steps, n_points, action_dim = iparams[I_HORIZON], iparams[I_STALL_STEPS], iparams[I_N_POINTS], iparams[I_ACTION_DIM]
+    esc_window, esc_still = iparams[I_ESC_WINDOW], fparams[F_ESC_STILL]
     greedy, connect, clip_target = iparams[I_GREEDY] != 0, iparams[I_CONNECT] != 0, iparams[I_CLIP] != 0
     d = q0.shape[0]
     count = pts.shape[0]
@@ -542,6 +544,13 @@ def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, 
                 end = END_STALLED  # the goal is still tried from here (greedy)
                 if not greedy:
                     break
+        if end != END_STALLED and esc_window > 0 and t >= esc_window:  # stuck: an escape starts here
+            back = 0.0
+            for i in range(d):
+                back += (new_q[i] - path[t - esc_window, i]) ** 2
+            if np.sqrt(back) < esc_still:
+                end = END_ESCAPE
+                break
     rows = t + 1
     if end == END_GREEDY or end == END_TOL_GOAL:  # the path ends at the goal
         for i in range(d):
@@ -569,7 +578,10 @@ def rollout_ball(
     (the quick test, then the certified check of ``edge_free``; stop at the goal when it
     is free); the action of the network for the step's draws from ``stream``; the move as
     ``q_free`` makes it; stop within the goal tolerance (then, with ``connect``, the edge
-    to the goal, as ``connect_to_goal``), at the horizon or stalled.
+    to the goal, as ``connect_to_goal``), at the horizon or stalled, or (``I_ESC_WINDOW``
+    > 0) where the robot ended a step less than ``F_ESC_STILL`` from where it was
+    ``I_ESC_WINDOW`` steps before (``END_ESCAPE``: the path so far, for the caller to go
+    on from, as the escape of ``PolicyPlanner`` starts there).
 
     ``boxes``: ``(centres, rotations, half sides)``; ``pts``, ``nrm``: the observer's
     points of the scene and their normals (``(count, 0)`` without); ``weights``: :func:`pack_weights`;

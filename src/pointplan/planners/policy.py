@@ -308,7 +308,9 @@ ESCAPE_DEFAULTS: dict[str, Escape] = {
 
 
 #: ``info["end"]`` of the compiled rollout's end codes (``_policy_kernels.END_*``)
-_END_NAMES = ("horizon", "stalled", "goal", "goal", "near-goal", "near-goal")
+_END_NAMES = ("horizon", "stalled", "goal", "goal", "near-goal", "near-goal", "escape")
+#: the end code of a compiled rollout that stopped where an escape starts (``END_ESCAPE``)
+_K_END_ESCAPE = _END_NAMES.index("escape")
 
 
 class _GoalTester:
@@ -404,9 +406,9 @@ class PolicyPlanner:
     the robot's default (:data:`ESCAPE_DEFAULTS`: the S-shape, whose cloned policies pin
     themselves against obstacles, samples wider; the sphere, whose policies dither in one
     place, heads for a subgoal; off for the disc, where validation showed no change).
-    With an escape the compiled rollout is not used: the sphere's `global` policy then plans
-    in the numpy one-robot rollout, about twice the time per problem (7.7 against 3.7 ms
-    mean in 3D-Boxes, docs/results.md).
+    With an escape the compiled rollout runs up to where the first escape starts and the
+    numpy one-robot rollout goes on from there (the same steps as the numpy rollout from
+    the start: no escape has drawn anything before).
 
     A PointNet actor is copied to numpy when the planner is made (later changes to the
     policy's weights are not seen; make a new planner). Scenes with moving obstacles and
@@ -555,7 +557,7 @@ class PolicyPlanner:
             return self._plan_batched(problem)
         if self._observer is None:
             self._make_observer()
-        if self._kernel_args is not None and self.escape.steps == 0:
+        if self._kernel_args is not None:
             res = self._rollout_compiled(problem)
             if res is not None:
                 return res
@@ -690,17 +692,19 @@ class PolicyPlanner:
         width = fast.inp[0].shape[1]
         if any(w.shape != (width, width) for w, _ in fast.hidden) or fast.head[0][0].shape[0] != width + robot.dim:
             return None
-        fparams = np.zeros(6)
-        fparams[[K.F_RADIUS, K.F_SUBSTEP, K.F_GOAL_TOL, K.F_STALL_DIST, K.F_RESOLUTION, K.F_S32]] = (
+        escaping = self.escape.steps > 0
+        fparams = np.zeros(7)
+        fparams[[K.F_RADIUS, K.F_SUBSTEP, K.F_GOAL_TOL, K.F_STALL_DIST, K.F_RESOLUTION, K.F_S32, K.F_ESC_STILL]] = (
             robot.radius,
             env.substep,
             env.goal_tolerance,
             self.stall_distance,
             0.01,  # the goal edge: as connect_to_goal checks it
             float(np.float32(robot.action_scale[0])),
+            self.escape.still if escaping else 0.0,
         )
-        iparams = np.zeros(7, np.int64)
-        iparams[[K.I_HORIZON, K.I_STALL_STEPS, K.I_GREEDY, K.I_CONNECT, K.I_CLIP, K.I_N_POINTS, K.I_ACTION_DIM]] = [
+        iparams = np.zeros(8, np.int64)
+        iparams[[K.I_HORIZON, K.I_STALL_STEPS, K.I_GREEDY, K.I_CONNECT, K.I_CLIP, K.I_N_POINTS, K.I_ACTION_DIM, K.I_ESC_WINDOW]] = [
             int(self.horizon),
             int(self.stall_steps or 0),
             int(self.greedy_goal),
@@ -708,6 +712,7 @@ class PolicyPlanner:
             int(env.bounds == "clip"),
             int(env.n_points or 0),
             int(fast.action_dim),
+            int(self.escape.window) if escaping else 0,  # the compiled rollout stops where an escape starts
         ]
         return K.pack_weights(fast.inp, fast.hidden, fast.head), np.ascontiguousarray(robot.action_scale, np.float64), fparams, iparams
 
@@ -756,6 +761,10 @@ class PolicyPlanner:
         t1 = time.perf_counter()
         end, rows, checks, _ = self._kernel(start, goal, *args, path)
         t2 = time.perf_counter()
+        if end == _K_END_ESCAPE:  # stuck: the escape and the rest of the rollout go on in Python
+            r = _Rollout(q=path[rows - 1].copy(), path=list(path[:rows].copy()), t=rows - 1, checks=checks)
+            self._start_escape(r, scene)
+            return self._rollout_one(problem, r, t0, t2 - t1)
         success, to_goal, entries = self._end_entries[end]
         steps = rows - 1 - to_goal
         info = {"time_split": {"observe": 0.0, "network": 0.0, "motion": 0.0, "goal": 0.0, "compiled": t2 - t1, "steps": steps}, **entries}
@@ -785,6 +794,8 @@ class PolicyPlanner:
             to_goal = end in (K.END_GREEDY, K.END_TOL_GOAL)
             success = to_goal or end in (K.END_TOL_BLOCKED, K.END_TOL)
             entries: dict[str, Any] = {"end": name}
+            if self.escape.steps > 0:
+                entries["escapes"] = 0  # (a rollout that escapes goes on in numpy, which counts them)
             if end == K.END_GREEDY:
                 entries["greedy_goal"] = True
             if to_goal or end == K.END_TOL_BLOCKED:
@@ -797,7 +808,15 @@ class PolicyPlanner:
     def _goal_tester(self, scene: Scene, goal: np.ndarray) -> _GoalTester:
         return _GoalTester(self.robot, scene, goal)
 
-    def _rollout_one(self, problem: Problem) -> PlanResult:
+    def _start_escape(self, r: _Rollout, scene: Scene) -> None:
+        """``r`` is stuck (the escape's test): its next ``escape.steps`` steps escape."""
+        r.escape_left = self.escape.steps
+        r.escapes += 1
+        if self.escape.subgoal:
+            assert self._escape_rng is not None
+            r.subgoal = self.robot.sample_uniform(self._escape_rng, 1, scene.low, scene.high)[0]
+
+    def _rollout_one(self, problem: Problem, resume: _Rollout | None = None, t0: float | None = None, t_compiled: float = 0.0) -> PlanResult:
         """One robot stepped as the environment steps it: the same observation draws as
         ``rollout_batch`` with this one problem and the same ``q_free``, without the batch.
 
@@ -811,8 +830,11 @@ class PolicyPlanner:
 
         With ``greedy_goal`` the rollout stops at the first configuration it reaches (the
         start included) from which the straight edge to the goal is certified free
-        (:class:`_GoalTester`); up to there it is the rollout without."""
-        t0 = time.perf_counter()
+        (:class:`_GoalTester`); up to there it is the rollout without.
+
+        ``resume``: go on from this rollout (the compiled one's, where an escape started;
+        ``t0`` its start time, ``t_compiled`` its seconds in the kernel)."""
+        t0 = time.perf_counter() if t0 is None else t0
         robot, scene = self.robot, problem.scene
         if problem.start.shape != (robot.config_dim,):
             raise ValueError(f"problem {problem.tag or ''} does not fit robot {robot.name}")
@@ -820,7 +842,7 @@ class PolicyPlanner:
         lean = self._lean_step()
         goal = np.asarray(problem.goal, np.float64)
         q = np.asarray(problem.start, np.float64).copy()
-        r = _Rollout(q=q, path=[q])
+        r = _Rollout(q=q, path=[q]) if resume is None else resume
         tester = self._goal_tester(scene, goal) if self.greedy_goal else None
         ctx = torch_threads(1) if self.fast is None else contextlib.nullcontext()
         with ctx:
@@ -838,6 +860,8 @@ class PolicyPlanner:
         path = np.stack(r.path + [goal]) if r.at_goal else np.stack(r.path)
         res = PlanResult(path=path, success=r.success or r.at_goal, nodes=steps, collision_checks=r.checks, time_s=time.perf_counter() - t0)
         res.info["time_split"] = {"observe": r.t_obs, "network": r.t_net, "motion": r.t_motion, "goal": r.t_goal, "steps": steps}
+        if resume is not None:
+            res.info["time_split"]["compiled"] = t_compiled
         if self.escape.steps > 0:
             res.info["escapes"] = r.escapes
         if r.at_goal:
@@ -941,11 +965,7 @@ class PolicyPlanner:
                 r.end = "stalled"
                 return
             if esc.steps > 0 and r.escape_left == 0 and r.t >= esc.window and float(robot.distance(r.q, r.path[r.t - esc.window])) < esc.still:
-                r.escape_left = esc.steps  # stuck: the next steps are sampled (run ahead again)
-                r.escapes += 1
-                if esc.subgoal:
-                    assert self._escape_rng is not None
-                    r.subgoal = robot.sample_uniform(self._escape_rng, 1, scene.low, scene.high)[0]
+                self._start_escape(r, scene)  # stuck: the next steps escape (run ahead again)
                 return
             if not agrees:
                 return  # the run ahead went elsewhere from here: run again from r.q
