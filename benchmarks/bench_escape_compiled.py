@@ -60,8 +60,10 @@ def main() -> None:
             f"{name:9s} {ts.mean():6.2f} / {np.median(ts):5.2f} ms (mean / median)  success {np.mean(ok):.3f}  "
             f"steps {np.mean([r.nodes for r in res]):5.1f}  escaped {sum(r.info.get('escapes', 0) > 0 for r in res)}"
         )
-    print(f"numpy / compiled: {np.mean(times['numpy']) / np.mean(times['compiled']):.2f}x (mean), "
-          f"{np.median(times['numpy']) / np.median(times['compiled']):.2f}x (median); same paths {same}/{len(probs)}")
+    print(
+        f"numpy / compiled: {np.mean(times['numpy']) / np.mean(times['compiled']):.2f}x (mean), "
+        f"{np.median(times['numpy']) / np.median(times['compiled']):.2f}x (median); same paths {same}/{len(probs)}"
+    )
 
 
 if __name__ == "__main__":

@@ -117,8 +117,13 @@ def main() -> None:
             t0 = time.perf_counter()
             best, q = search(clear, CORNERS[name], width, cfg.slot_length, args.starts, rng)
             free = not bool(np.asarray(robot.collides(scene.world, q[None]))[0])
-            rows.append({"width_bars": wb, "corner": name, "best_clearance": best, "pose": q.tolist(), "pointplan_free": free, "seconds": time.perf_counter() - t0})
-            print(f"width {wb:4.2f} bars ({width:.3f}), corner {name}: best clearance {best:+.4f}  (pointplan: {'free' if free else 'collides'}; {rows[-1]['seconds']:.0f} s)", file=sys.stderr)
+            rows.append(
+                {"width_bars": wb, "corner": name, "best_clearance": best, "pose": q.tolist(), "pointplan_free": free, "seconds": time.perf_counter() - t0}
+            )
+            print(
+                f"width {wb:4.2f} bars ({width:.3f}), corner {name}: best clearance {best:+.4f}  (pointplan: {'free' if free else 'collides'}; {rows[-1]['seconds']:.0f} s)",
+                file=sys.stderr,
+            )
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps({"command": " ".join(sys.argv), "starts": args.starts, "rows": rows}, indent=1))

@@ -31,9 +31,9 @@ from pointplan.evaluation.evaluate import check_path, timed_path
 from pointplan.planners.base import path_length
 from pointplan.planners.birrt import BiRRT
 from pointplan.planners.edges import edge_free
+from pointplan.robots.sshape import S_CORNERS, SShape
 from pointplan.scenes.scene import Problem
 from pointplan.scenes.scenes3d import SlotConfig, SlotScenario
-from pointplan.robots.sshape import S_CORNERS, SShape
 
 
 class WallClearance:
@@ -43,7 +43,9 @@ class WallClearance:
     def __init__(self, robot: SShape, problem: Problem) -> None:
         parts = robot.parts
         self.bars = [(coal.Box(*(2 * h)), c) for c, h in zip(parts.box_centers, parts.box_halfs, strict=True)]
-        self.wall = [(coal.Box(*o.size), coal.Transform3s(np.asarray(o.rotation, np.float64), np.asarray(o.center, np.float64))) for o in problem.scene.obstacles]
+        self.wall = [
+            (coal.Box(*o.size), coal.Transform3s(np.asarray(o.rotation, np.float64), np.asarray(o.center, np.float64))) for o in problem.scene.obstacles
+        ]
         self.req = coal.DistanceRequest()
         self.req.enable_signed_distance = True
 
