@@ -291,6 +291,28 @@ def demos(args: argparse.Namespace) -> None:
             save_demos(out, sc, demos_from_paths(sc, "train", args.seed, paths), "train", args.seed)
 
 
+def merge(out: str, files: list[str]) -> None:
+    """One demonstration file of several written by ``--save-demos`` (the same seed; a problem
+    in more than one keeps its first path)."""
+    from pointplan.learning.bc import demos_from_paths, load_demos, save_demos
+    from pointplan.scenes.scenarios import make_scenario
+
+    sc = make_scenario("slot", robot="sshape")
+    seeds, paths, seen = set(), [], set()
+    for f in files:
+        with np.load(f, allow_pickle=False) as z:
+            seeds.add(int(z["seed"]))
+        for k, path in load_demos(f, sc).paths:
+            if k not in seen:
+                seen.add(k)
+                paths.append((k, path))
+    if len(seeds) != 1:
+        raise SystemExit(f"the files have different seeds: {sorted(seeds)}")
+    seed = seeds.pop()
+    save_demos(out, sc, demos_from_paths(sc, "train", seed, paths), "train", seed)
+    print(f"{out}: {len(paths)} demonstrations from {len(files)} files", file=sys.stderr)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--problems", type=int, default=6)
@@ -307,8 +329,12 @@ def main() -> None:
     ap.add_argument("--verbose", action="store_true")
     ap.add_argument("--save-demos", help="plan Slot's training problems for pointplan bc --demos into this file (see demos())")
     ap.add_argument("--skip-below", type=float, default=0.0, help="with --save-demos: leave slots narrower than this (bars) out")
+    ap.add_argument("--merge", nargs="+", help="with --save-demos: write these demonstration files into that one instead of planning")
     ap.add_argument("--demo-n", type=int, default=3000, help="the n of the demonstration indices")
     args = ap.parse_args()
+    if args.save_demos and args.merge:
+        merge(args.save_demos, args.merge)
+        return
     if args.save_demos:
         demos(args)
         return
