@@ -48,11 +48,22 @@ class WallClearance:
         ]
         self.req = coal.DistanceRequest()
         self.req.enable_signed_distance = True
+        # the wall: boxes spanning the plane x = plane, half_wall thick; a bar's reach: its half diagonal
+        self.plane = float(problem.scene.obstacles[0].center[0])
+        self.half_wall = max(float(o.size[0]) for o in problem.scene.obstacles) / 2
+        self.reach = [float(np.linalg.norm(h)) for h in parts.box_halfs]
 
-    def __call__(self, rot: np.ndarray, pos: np.ndarray) -> float:
+    def __call__(self, rot: np.ndarray, pos: np.ndarray, above: float = np.inf) -> float:
+        """The clearance; with ``above``, a bar whose centre is farther from the wall's
+        plane than its reach plus the wall's half thickness plus ``above`` is skipped (its
+        distance is more than ``above``), and the answer is exact only up to ``above``."""
         best = np.inf
-        for shape, c in self.bars:  # the bars are axis-aligned in the body frame
-            tf = coal.Transform3s(rot, rot @ c + pos)
+        for (shape, c), reach in zip(self.bars, self.reach, strict=True):  # the bars are axis-aligned in the body frame
+            centre = rot @ c + pos
+            if abs(centre[0] - self.plane) > reach + self.half_wall + above:
+                best = min(best, abs(centre[0] - self.plane) - reach - self.half_wall)
+                continue
+            tf = coal.Transform3s(rot, centre)
             for wshape, wtf in self.wall:
                 best = min(best, coal.distance(shape, tf, wshape, wtf, self.req, coal.DistanceResult()))
         return float(best)
@@ -96,7 +107,7 @@ class Sweep:
 
     def cost(self, v: np.ndarray, rot0: np.ndarray, u0: np.ndarray, s: float, w_cont: float) -> float:
         rot, pos, u = self.pose(v, rot0, s)
-        cl = self.clear(rot, pos)
+        cl = self.clear(rot, pos, self.cap)
         x = (self.sample_pts @ rot.T + pos)[:, 0]
         side = np.sum(np.maximum(0.0, -x[self.samples < s - 0.02])) + np.sum(np.maximum(0.0, x[self.samples > s + 0.02]))
         return -20.0 * min(cl, self.cap) + 2.0 * side + w_cont * (np.sum(v[:3] ** 2) + 10.0 * np.sum((u - u0) ** 2))
