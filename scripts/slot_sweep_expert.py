@@ -86,9 +86,13 @@ def point_at(pts: np.ndarray, arc: np.ndarray, s: float) -> np.ndarray:
 class Sweep:
     """The sweep of one problem and one leading end (``order``)."""
 
-    def __init__(self, robot: SShape, problem: Problem, order: str, rng: np.random.Generator, min_clearance: float = 0.0015) -> None:
+    def __init__(self, robot: SShape, problem: Problem, order: str, rng: np.random.Generator, min_clearance: float = 0.0015, guide: float = 0.0) -> None:
         slot = problem.scene.__dict__["slot"]
         self.problem, self.rng, self.min_clearance = problem, rng, float(min_clearance)
+        #: with ``guide > 0``, the sweep toward a bend is pulled to a free pose of the bend in
+        #: the opening found beforehand (weight ``guide`` on the squared angle, rising along
+        #: the bar that leads there)
+        self.guide, self.target, self.w_target = float(guide), None, 0.0
         width, self.mid, long_axis = float(slot["width"]), np.asarray(slot["center"], np.float64), int(slot["long_axis"])
         self.e_long, self.e_thin = np.eye(3)[long_axis], np.eye(3)[3 - long_axis]
         self.half = np.array([0.2, width / 2])
@@ -110,7 +114,40 @@ class Sweep:
         cl = self.clear(rot, pos, self.cap)
         x = (self.sample_pts @ rot.T + pos)[:, 0]
         side = np.sum(np.maximum(0.0, -x[self.samples < s - 0.02])) + np.sum(np.maximum(0.0, x[self.samples > s + 0.02]))
-        return -20.0 * min(cl, self.cap) + 2.0 * side + w_cont * (np.sum(v[:3] ** 2) + 10.0 * np.sum((u - u0) ** 2))
+        pull = 0.0
+        if self.target is not None and self.w_target > 0:
+            pull = self.w_target * float(np.sum(Rotation.from_matrix(self.target.T @ rot).as_rotvec() ** 2))
+        return -20.0 * min(cl, self.cap) + 2.0 * side + w_cont * (np.sum(v[:3] ** 2) + 10.0 * np.sum((u - u0) ** 2)) + pull
+
+    def bend_poses(self, k: int, starts: int = 16) -> list[np.ndarray]:
+        """Rotations of free poses with the centreline's corner ``k`` in the opening (the
+        part before it past the wall), from random starts."""
+        found = []
+        target, self.target = self.target, None
+        for _ in range(starts):
+            rot0 = Rotation.random(random_state=self.rng).as_matrix()
+            v0 = np.concatenate([np.zeros(3), self.rng.normal(0, 0.3, 2)])
+            r = minimize(self.cost, v0, args=(rot0, np.zeros(2), float(self.arc[k]), 0.0), method="Nelder-Mead", options={"maxiter": 800})
+            rot, pos, _ = self.pose(r.x, rot0, float(self.arc[k]))
+            if self.clear(rot, pos) >= self.min_clearance:
+                found.append(rot)
+        self.target = target
+        return found
+
+    def aim(self, rot: np.ndarray, s: float, cache: dict[int, list[np.ndarray]]) -> None:
+        """Set the target for arc length ``s``: the free pose of the next bend nearest to
+        ``rot`` (chosen once per bar), its weight rising from 0 at the bar's start."""
+        if self.guide <= 0:
+            return
+        k = int(np.searchsorted(self.arc, s, side="left"))  # the corner at or after s
+        if k <= 0 or k >= len(self.arc) - 1:
+            self.target, self.w_target = None, 0.0
+            return
+        if k not in cache:
+            poses = self.bend_poses(k)
+            cache[k] = [min(poses, key=lambda r: float(np.linalg.norm(Rotation.from_matrix(r.T @ rot).as_rotvec())))] if poses else []
+        self.target = cache[k][0] if cache[k] else None
+        self.w_target = self.guide * (s - self.arc[k - 1]) / (self.arc[k] - self.arc[k - 1])
 
     def first(self) -> tuple[np.ndarray, np.ndarray]:
         """The first pose: the leading tip in the opening, the body behind the wall."""
@@ -148,17 +185,26 @@ class Sweep:
 
 
 def sweep(
-    robot: SShape, problem: Problem, order: str, ds: float, rng: np.random.Generator, verbose: bool = False, min_clearance: float = 0.0015
+    robot: SShape,
+    problem: Problem,
+    order: str,
+    ds: float,
+    rng: np.random.Generator,
+    verbose: bool = False,
+    min_clearance: float = 0.0015,
+    guide: float = 0.0,
 ) -> list[np.ndarray] | None:
     """The sweep's poses, joined by certified straight edges (an edge that collides is
     split at its middle arc length, up to 4 times), or ``None`` where no free pose was
     found for some ``s``."""
-    sw = Sweep(robot, problem, order, rng, min_clearance)
+    sw = Sweep(robot, problem, order, rng, min_clearance, guide)
     rot, u = sw.first()
     states = [(0.0, rot, u)]
     s = 0.0
+    targets: dict[int, list[np.ndarray]] = {}
     while s < sw.arc[-1]:
         s = min(s + ds, sw.arc[-1])
+        sw.aim(rot, s, targets)
         ok, cl, rot, u = sw.next(rot, u, s)
         if not ok:
             if verbose:
@@ -218,7 +264,15 @@ def simplify(robot: SShape, problem: Problem, path: np.ndarray, seed: int, short
 
 
 def plan(
-    robot: SShape, problem: Problem, ds: float, seed: int, max_nodes: int, verbose: bool = False, min_clearance: float = 0.0015, tries: int = 1
+    robot: SShape,
+    problem: Problem,
+    ds: float,
+    seed: int,
+    max_nodes: int,
+    verbose: bool = False,
+    min_clearance: float = 0.0015,
+    tries: int = 1,
+    guide: float = 0.0,
 ) -> tuple[np.ndarray | None, dict]:
     """A path of ``problem`` through its slot, or ``None``: the sweep led by bar A, then by
     bar E, ``tries`` times (each from another random first pose), the first that works."""
@@ -226,7 +280,7 @@ def plan(
     info: dict = {}
     for order in ("A", "E") * max(1, tries):
         t0 = time.perf_counter()
-        poses = sweep(robot, problem, order, ds, rng, verbose, min_clearance)
+        poses = sweep(robot, problem, order, ds, rng, verbose, min_clearance, guide)
         info[f"sweep_{order}_s"] = round(info.get(f"sweep_{order}_s", 0.0) + time.perf_counter() - t0, 1)
         if poses is None:
             continue
@@ -290,7 +344,7 @@ def demos(args: argparse.Namespace) -> None:
             res = BiRRT(robot, seed=index, max_nodes=args.max_nodes).plan(p)
             path, how = (res.path if res.success else None), "birrt"
         if path is None:
-            path, _ = plan(robot, p, args.ds, index, args.max_nodes, args.verbose, args.min_clearance, args.tries)
+            path, _ = plan(robot, p, args.ds, index, args.max_nodes, args.verbose, args.min_clearance, args.tries, args.guide)
             how = "sweep"
         good = path is not None and bool(check_path(robot, p, path))
         print(f"demo {i}: width {wb:.2f} bars, {how}, solved {good}, {time.perf_counter() - t:.1f} s", flush=True)
@@ -335,6 +389,7 @@ def main() -> None:
     ap.add_argument("--ds", type=float, default=0.004, help="arc length between sweep poses")
     ap.add_argument("--max-nodes", type=int, default=5000, help="Bi-RRT nodes for each end")
     ap.add_argument("--min-clearance", type=float, default=0.0015, help="clearance (coal) every sweep pose must have")
+    ap.add_argument("--guide", type=float, default=0.0, help="pull toward free poses of the next bend found beforehand (weight; 0: off)")
     ap.add_argument("--tries", type=int, default=1, help="rounds of the two sweeps (A first, E first), each from a new first pose")
     ap.add_argument("--only", type=int, nargs="*", help="plan only these of the problems (0-based)")
     ap.add_argument("--verbose", action="store_true")
@@ -357,7 +412,7 @@ def main() -> None:
         if args.only is not None and i not in args.only:
             continue
         t = time.perf_counter()
-        path, info = plan(robot, p, args.ds, i, args.max_nodes, args.verbose, args.min_clearance, args.tries)
+        path, info = plan(robot, p, args.ds, i, args.max_nodes, args.verbose, args.min_clearance, args.tries, args.guide)
         good = path is not None and bool(check_path(robot, p, path))
         solved += good
         wb = p.scene.__dict__["slot"]["width"] / 0.036
