@@ -16,10 +16,17 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 
-def read(path: Path, offset_s: float = 0.0) -> dict[str, list[float]]:
+def read(path: Path, offset_s: float = 0.0, metric: str = "val_success") -> dict[str, list[float]]:
+    """Steps, wall time (plus ``offset_s``) and ``metric`` (as ``val_success``) of each row."""
     with path.open() as f:
         rows = list(csv.DictReader(f))
-    return {k: [float(r[k]) + (offset_s if k == "wall_time_s" else 0.0) for r in rows] for k in ("env_steps", "wall_time_s", "val_success")}
+    if rows and metric not in rows[0]:
+        raise SystemExit(f"{path}: no column {metric!r} (columns: {', '.join(rows[0])})")
+    return {
+        "env_steps": [float(r["env_steps"]) for r in rows],
+        "wall_time_s": [float(r["wall_time_s"]) + offset_s for r in rows],
+        "val_success": [float(r[metric]) for r in rows],
+    }
 
 
 def main() -> None:
@@ -29,13 +36,17 @@ def main() -> None:
     ap.add_argument("--offsets", nargs="*", type=float, help="seconds to add to each run's wall time (e.g. BC time)")
     ap.add_argument("--ymin", type=float, default=0.0, help="lower end of the success axis (e.g. 0.95 to see late training)")
     ap.add_argument("--from-steps", type=float, default=0.0, help="leave out evaluations before this many env steps")
+    ap.add_argument("--metrics", nargs="*", help="the column plotted for each run (default: val_success; e.g. val_success_escape of pointplan ppo)")
     ap.add_argument("-o", "--output", default="training.png")
     args = ap.parse_args()
     labels = args.labels or [p.parent.name for p in args.csv]
     offsets = args.offsets or [0.0] * len(args.csv)
+    metrics = args.metrics or ["val_success"] * len(args.csv)
+    if len(metrics) != len(args.csv):
+        ap.error("--metrics needs one column per run")
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
-    for path, label, off in zip(args.csv, labels, offsets):
-        d = read(path, off)
+    for path, label, off, metric in zip(args.csv, labels, offsets, metrics):
+        d = read(path, off, metric)
         keep = [i for i, n in enumerate(d["env_steps"]) if n >= args.from_steps]
         d = {k: [v[i] for i in keep] for k, v in d.items()}
         if not keep:

@@ -30,14 +30,15 @@ def test_the_sphere_policy_ships_and_plans_without_a_path() -> None:
 
 
 def test_the_sshape_policy_ships_and_its_paths_are_certified() -> None:
-    """The S-shape's interim policies (cloned; 35% of 3D-Boxes validation problems each) are
-    found without a path, the global one by default; every path they claim passes the
-    evaluator's check, and sampled retries solve at least what the mean action solves."""
+    """The S-shape's policies (global: cloned; local: cloned, then PPO; 35-40% of 3D-Boxes
+    validation problems each with the mean action, 74.5 and 82.5% with the planner's escape) are
+    found without a path, the local one by default; every path they claim passes the
+    evaluator's check, and sampled retries solve at least what the first rollout solves."""
     assert ("sshape", "local") in shipped_policies() and ("sshape", "global") in shipped_policies()
     scenario = make_scenario("boxes3d", robot="sshape")
-    assert make_planner("policy", scenario.robot, observation="local").policy.observation == "local"
+    assert make_planner("policy", scenario.robot, observation="global").policy.observation == "global"
     planner = make_planner("policy", scenario.robot)
-    assert planner.policy.observation == "global" and planner.policy.robot.name == "sshape" and planner.policy.n_points == 256
+    assert planner.policy.observation == "local" and planner.policy.robot.name == "sshape" and planner.policy.n_points == 64
     retry = make_planner("policy", scenario.robot, attempts=4)
     problems = scenario.problems("test", 12, seed=0)
     solved = solved_retry = 0

@@ -831,6 +831,64 @@ def cmd_lsample_train(args: argparse.Namespace) -> int:
     return 130 if summary["interrupted"] else 0
 
 
+#: ppo options derived from PPOConfig: flag -> field path
+PPO_OPTIONS = {
+    "init-actor": "init_actor",
+    "env": "env",
+    "steps": "total_steps",
+    "num-envs": "num_envs",
+    "rollout-steps": "rollout_steps",
+    "epochs": "epochs",
+    "minibatch": "minibatch",
+    "lr": "lr",
+    "value-lr": "value_lr",
+    "clip": "clip",
+    "target-kl": "target_kl",
+    "gamma": "gamma",
+    "lam": "lam",
+    "entropy-coef": "entropy_coef",
+    "value-warmup": "value_warmup",
+    "action-cost": "action_cost",
+    "reward-collision": "reward_collision",
+    "eval-every": "eval_every",
+    "eval-episodes": "eval_episodes",
+    "eval-escape": "eval_escape",
+    "select": "select",
+    "seed": "seed",
+    "device": "device",
+}
+
+
+def cmd_ppo(args: argparse.Namespace) -> int:
+    from .config import from_dict, given_options, replace_paths
+    from .learning.ppo import PPOConfig, train_ppo
+
+    given = given_options(args, PPO_OPTIONS)
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    if args.resume:
+        from .models.checkpoint import load_checkpoint
+
+        data = load_checkpoint(args.resume)
+        if "ppo_config" not in data or "ppo" not in data:
+            raise CLIError(f"--resume {args.resume}: not a PPO trainer state; resume from a PPO run's last.pt")
+        cfg = replace_paths(from_dict(PPOConfig, data["ppo_config"]), given)
+        run_dir = args.run_dir or str(Path(args.resume).parent)
+    else:
+        if not given.get("init_actor"):
+            raise CLIError("--init-actor is required: PPO fine-tunes a policy checkpoint (e.g. runs/bc/bc.pt from `pointplan bc`, or a shipped one)")
+        cfg = replace_paths(PPOConfig(), given)
+        run_dir = args.run_dir or "runs/ppo"
+    summary = train_ppo(cfg, run_dir, resume=args.resume, progress=not args.quiet)
+    print(
+        f"best validation success {summary['best_success']:.3f} after {summary['steps']} env steps, {summary['wall_time_s']:.0f} s; checkpoints in {summary['run_dir']}"
+    )
+    _write_json(args.json, summary)
+    return 130 if summary["interrupted"] else 0
+
+
 def cmd_convert_checkpoint(args: argparse.Namespace) -> int:
     from .models.checkpoint import VERSION
     from .models.convert import convert_checkpoint
@@ -1051,6 +1109,24 @@ def _add_lsample_parser(sub: Any) -> None:
     p.set_defaults(func=cmd_lsample_train)
 
 
+def _add_ppo_parser(sub: Any) -> None:
+    from .config import add_config_options
+    from .learning.ppo import PPOConfig
+
+    p = _subparser(
+        sub,
+        "ppo",
+        "fine-tune a policy (e.g. a cloned one) with PPO on its own sampled rollouts (checkpoints best.pt and last.pt, metrics.csv in --run-dir)",
+    )
+    add_config_options(p, PPOConfig(), PPO_OPTIONS)
+    p.add_argument("--resume", help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own")
+    p.add_argument("--run-dir", help="where checkpoints and logs go (default: runs/ppo; with --resume the checkpoint's folder)")
+    p.add_argument("--threads", type=positive_int, help="PyTorch threads (default: PyTorch's; 1 per job when several share the cores)")
+    p.add_argument("--json", help="also write the summary to this JSON file")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=cmd_ppo)
+
+
 def _add_convert_parser(sub: Any) -> None:
     p = _subparser(sub, "convert-checkpoint", "rewrite an older checkpoint holding pickled objects as a data-only one (unpickles OLD: trusted files only)")
     p.add_argument("old", help="the checkpoint to convert; it is fully unpickled, which can run code")
@@ -1075,6 +1151,7 @@ def build_parser() -> argparse.ArgumentParser:
         _add_collision_parser,
         _add_mpnet_parser,
         _add_lsample_parser,
+        _add_ppo_parser,
         _add_convert_parser,
     ):
         add(sub)

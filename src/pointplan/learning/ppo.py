@@ -1,0 +1,419 @@
+"""Fine-tuning a policy on-policy with PPO (clipped surrogate, GAE).
+
+SAC improves the actor along its critics' action gradient; for the cloned S-shape those
+critics ranked actions worse than chance draws from the actor itself, and every actor that
+followed them lost its cloned skill (docs/learning.md, "The S-shape"). PPO needs no
+action gradient from a critic: it raises the probability of the sampled actions whose
+return beat a state-value baseline, so a critic's error costs variance, not direction.
+The actor starts from a cloned one (``init_actor``), whose sampled policy already solves
+far more than its mean; PPO sharpens what the samples find.
+
+``E`` workspaces step together through the batched core for ``rollout_steps`` steps; the
+actions' pre-tanh draws ``u`` are stored, so the tanh's Jacobian cancels in the ratio of
+new to old probabilities. A separate value network (same encoder shape as the actor) is
+fitted to the returns; for ``value_warmup`` iterations it learns alone while the actor is
+frozen. Every ``eval_every`` environment steps the mean action is rolled out on the
+validation problems (the paper's protocol) and, optionally, with the robot's default
+escape; ``best.pt`` keeps the best by the chosen criterion, ``last.pt`` the trainer state.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from ..config import from_dict
+from ..envs.core import BatchedCore, EnvConfig
+from ..models.actor_critic import Actor, NetConfig
+from ..models.checkpoint import CheckpointError, load_checkpoint, save_checkpoint, to_dict
+from ..models.encoders import make_encoder, mlp
+from ..models.inputs import goal_input, obs_input
+from ..scenes.scenarios import make_scenario
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """A PPO fine-tuning run (saved with its checkpoints)."""
+
+    #: the policy checkpoint whose actor (and network shape, scenario, observation) the run starts from
+    init_actor: str = ""
+    #: the scenario to train in; empty takes the initial policy's
+    env: str = ""
+    #: environments stepping together
+    num_envs: int = field(default=32, metadata={"min": 1})
+    #: steps of every environment per iteration (one batch of num_envs x rollout_steps transitions)
+    rollout_steps: int = field(default=80, metadata={"min": 1})
+    #: environment transitions to collect
+    total_steps: int = field(default=2_000_000, metadata={"min": 1})
+    #: passes over each batch
+    epochs: int = field(default=4, metadata={"min": 1})
+    #: transitions per gradient step
+    minibatch: int = field(default=512, metadata={"min": 1})
+    #: Adam step size of the actor
+    lr: float = 3e-5
+    #: Adam step size of the value network
+    value_lr: float = 3e-4
+    #: the ratio of new to old action probabilities is clipped to 1 +- this
+    clip: float = 0.2
+    #: stop an iteration's actor epochs once the approximate KL from the old policy passes this (0: never)
+    target_kl: float = 0.02
+    gamma: float = 0.99
+    #: GAE's lambda
+    lam: float = 0.95
+    #: weight of the pre-tanh Gaussian's entropy in the actor's loss
+    entropy_coef: float = 0.0
+    #: iterations in which only the value network learns (the actor acts, frozen)
+    value_warmup: int = 10
+    #: rewards are multiplied by this for the value network (returns of order 1)
+    reward_scale: float = 0.1
+    #: gradient norm clip of both networks
+    max_grad_norm: float = 0.5
+    #: weight of the action's norm in the reward (the paper: 1; see ``EnvConfig.action_cost``)
+    action_cost: float = field(default=1.0, metadata={"min": 0})
+    #: reward of a step that collided (the environment's default: -4); a milder penalty
+    #: keeps PPO from buying fewer collisions with less of the noise that finds the way round
+    reward_collision: float = -4.0
+    #: environment transitions between two validations (and checkpoints)
+    eval_every: int = field(default=51_200, metadata={"min": 1})
+    #: validation problems (the ``val`` split)
+    eval_episodes: int = field(default=200, metadata={"min": 1})
+    #: also validate with the robot's default escape (the planner's default rollout)
+    eval_escape: bool = True
+    #: what ``best.pt`` is chosen by: ``mean`` (the plain mean-action rollout) or ``escape``
+    select: str = "mean"
+    seed: int = 0
+    device: str = "cpu"
+
+    def __post_init__(self) -> None:
+        if self.select not in ("mean", "escape"):
+            raise ValueError(f"select must be 'mean' or 'escape', not {self.select!r}")
+        if self.select == "escape" and not self.eval_escape:
+            raise ValueError("select='escape' needs eval_escape")
+        if not 0 < self.gamma <= 1 or not 0 <= self.lam <= 1:
+            raise ValueError("gamma must be in (0, 1] and lam in [0, 1]")
+        if self.clip <= 0:
+            raise ValueError(f"clip must be > 0, not {self.clip}")
+
+
+class ValueNetwork(nn.Module):
+    """``V(obs, goal) -> (B,)``: an encoder of its own and an MLP head."""
+
+    def __init__(self, obs_shape: tuple[int, ...], goal_dim: int, cfg: NetConfig) -> None:
+        super().__init__()
+        self.encoder = make_encoder(cfg.encoder, obs_shape)
+        feat = int(getattr(self.encoder, "features_dim"))
+        self.head = mlp([feat + goal_dim] + [cfg.head_width] * cfg.head_layers + [1])
+
+    def forward(self, obs: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        return self.head(torch.cat([self.encoder(obs), goal], -1)).squeeze(-1)
+
+
+def gaussian_logp(u: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
+    """Log-density of pre-tanh draws ``u`` under ``N(mean, exp(log_std))``, summed over the
+    action's axes (the tanh's Jacobian depends on ``u`` only and cancels in PPO's ratio)."""
+    z = (u - mean) * torch.exp(-log_std)
+    return (-0.5 * z**2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
+
+
+def gae(rewards: np.ndarray, values: np.ndarray, next_values: np.ndarray, dones: np.ndarray, gamma: float, lam: float) -> tuple[np.ndarray, np.ndarray]:
+    """Advantages and returns of ``(T, E)`` arrays: ``next_values[t]`` is the value of what
+    follows step ``t`` (0 after a success, the final state's value after a time limit);
+    ``dones[t]`` cuts the sum of TD errors where an episode ended."""
+    T = rewards.shape[0]
+    adv = np.zeros_like(rewards)
+    last = np.zeros(rewards.shape[1:], dtype=rewards.dtype)
+    for t in range(T - 1, -1, -1):
+        delta = rewards[t] + gamma * next_values[t] - values[t]
+        last = delta + gamma * lam * (1.0 - dones[t]) * last
+        adv[t] = last
+    return adv, adv + values
+
+
+@dataclass
+class _Batch:
+    obs: np.ndarray
+    goal: np.ndarray
+    u: np.ndarray
+    logp: np.ndarray
+    adv: np.ndarray
+    ret: np.ndarray
+
+
+class PPORun:
+    """The pieces of a PPO run and its counters (built by :func:`train_ppo`)."""
+
+    def __init__(self, cfg: PPOConfig, run_dir: Path, resume: str | Path | None) -> None:
+        self.cfg = cfg
+        self.run_dir = run_dir
+        init = load_checkpoint(resume if resume is not None else cfg.init_actor, cfg.device)
+        self.meta = {k: init[k] for k in ("env", "robot", "observation", "n_points", "obs_shape", "net")}
+        if cfg.env:
+            self.meta["env"] = cfg.env
+        self.scenario = make_scenario(self.meta["env"], robot=self.meta["robot"])
+        self.robot = self.scenario.robot
+        self.env_cfg = EnvConfig(
+            observation=self.meta["observation"],
+            n_points=self.meta["n_points"],
+            split="train",
+            action_cost=cfg.action_cost,
+            reward_collision=cfg.reward_collision,
+        )
+        self.core = BatchedCore(self.scenario, cfg.num_envs, self.env_cfg)
+        self.obs_shape = tuple(self.core.observer.space.shape)
+        if list(self.obs_shape) != list(self.meta["obs_shape"]):
+            raise CheckpointError(f"the initial policy sees observations of shape {self.meta['obs_shape']}, this environment gives {list(self.obs_shape)}")
+        self.net = from_dict(NetConfig, self.meta["net"])
+        self.device = torch.device(cfg.device)
+        torch.manual_seed(cfg.seed)
+        k = self.robot.twist_dim
+        self.actor = Actor(self.obs_shape, k, k, self.net).to(self.device)
+        self.actor.detach_encoder = False
+        self.actor.load_state_dict(init["actor"])
+        self.value = ValueNetwork(self.obs_shape, k, self.net).to(self.device)
+        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr)
+        self.opt_value = torch.optim.Adam(self.value.parameters(), lr=cfg.value_lr)
+        self.rng = np.random.default_rng(cfg.seed)
+        self.steps = 0
+        self.iterations = 0
+        self.best = -1.0
+        self.elapsed_before = 0.0
+        self.recent: list[float] = []
+        if resume is not None:
+            if "ppo" not in init:
+                raise CheckpointError(f"{resume}: not a PPO trainer state (resume from a PPO run's last.pt)")
+            st = init["ppo"]
+            self.value.load_state_dict(st["value"])
+            self.opt_actor.load_state_dict(st["opt_actor"])
+            self.opt_value.load_state_dict(st["opt_value"])
+            self.steps, self.iterations, self.best = int(st["steps"]), int(st["iterations"]), float(st["best"])
+            self.elapsed_before = float(st["wall_time_s"])
+            self.rng.bit_generator.state = st["rng"]
+            torch.set_rng_state(st["torch_rng"])
+        for g in self.opt_actor.param_groups:  # a resumed run takes the step sizes given now
+            g["lr"] = cfg.lr
+        for g in self.opt_value.param_groups:
+            g["lr"] = cfg.value_lr
+        self.val_problems = self.scenario.problems("val", cfg.eval_episodes, seed=cfg.seed)
+        self.core.reset_envs(range(cfg.num_envs), self.rng)
+        self.obs = self.core.observe(self.rng)["observation"]
+        self.t_start = time.perf_counter()
+        self.next_eval = (self.steps // cfg.eval_every + 1) * cfg.eval_every
+        self.history: list[dict[str, float]] = []
+
+    @property
+    def wall(self) -> float:
+        return self.elapsed_before + time.perf_counter() - self.t_start
+
+    def tensor(self, x: np.ndarray) -> torch.Tensor:
+        return torch.as_tensor(np.asarray(x, np.float32), device=self.device)
+
+    # ------------------------------------------------------------------ collection
+    def collect(self) -> _Batch:
+        """``rollout_steps`` steps of every environment with sampled actions."""
+        cfg, core, robot = self.cfg, self.core, self.robot
+        T, E = cfg.rollout_steps, cfg.num_envs
+        obs_b = np.zeros((T, E) + self.obs_shape, np.float32)
+        goal_b = np.zeros((T, E, robot.twist_dim), np.float32)
+        u_b = np.zeros((T, E, robot.twist_dim), np.float32)
+        logp_b = np.zeros((T, E), np.float32)
+        val_b = np.zeros((T, E), np.float32)
+        rew_b = np.zeros((T, E), np.float32)
+        next_b = np.zeros((T, E), np.float32)
+        done_b = np.zeros((T, E), np.float32)
+        truncated_at: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
+        with torch.no_grad():
+            for t in range(T):
+                o = obs_input(robot, self.obs)
+                g = goal_input(robot, core.q, core.goal)
+                ot, gt = self.tensor(o), self.tensor(g)
+                mean, log_std = self.actor(ot, gt)
+                u = mean + log_std.exp() * torch.randn_like(mean)
+                obs_b[t], goal_b[t], u_b[t] = o, g, u.cpu().numpy()
+                logp_b[t] = gaussian_logp(u, mean, log_std).cpu().numpy()
+                val_b[t] = self.value(ot, gt).cpu().numpy()
+                reward, term, trunc, _ = core.step(torch.tanh(u).cpu().numpy())
+                rew_b[t] = reward * cfg.reward_scale
+                done = term | trunc
+                done_b[t] = done
+                nxt = core.observe(self.rng)["observation"]
+                if trunc.any():  # a time limit: what follows is worth the final state's value
+                    idx = np.flatnonzero(trunc)
+                    truncated_at.append((t, idx, obs_input(robot, nxt[idx]), goal_input(robot, core.q[idx], core.goal[idx])))
+                if done.any():
+                    ended = np.flatnonzero(done)
+                    self.recent = (self.recent + [float(term[i]) for i in ended])[-400:]
+                    core.reset_envs(ended.tolist(), self.rng)
+                    fresh = core.observe(self.rng)["observation"]
+                    nxt = np.where(done.reshape((-1,) + (1,) * len(self.obs_shape)), fresh, nxt)
+                self.obs = nxt
+            last_v = self.value(self.tensor(obs_input(robot, self.obs)), self.tensor(goal_input(robot, core.q, core.goal))).cpu().numpy()
+            next_b[:-1] = val_b[1:]
+            next_b[-1] = last_v
+            next_b *= 1.0 - done_b  # successes and time limits: nothing (time limits get their value below)
+            for t, idx, o, g in truncated_at:
+                next_b[t, idx] = self.value(self.tensor(o), self.tensor(g)).cpu().numpy()
+        adv, ret = gae(rew_b, val_b, next_b, done_b, cfg.gamma, cfg.lam)
+        self.steps += T * E
+        flat = lambda x: x.reshape((T * E,) + x.shape[2:])  # noqa: E731
+        return _Batch(flat(obs_b), flat(goal_b), flat(u_b), flat(logp_b), flat(adv), flat(ret))
+
+    # ------------------------------------------------------------------ learning
+    def update(self, batch: _Batch) -> dict[str, float]:
+        cfg = self.cfg
+        n = len(batch.adv)
+        adv = (batch.adv - batch.adv.mean()) / (batch.adv.std() + 1e-8)
+        obs, goal, u = self.tensor(batch.obs), self.tensor(batch.goal), self.tensor(batch.u)
+        old_logp, adv_t, ret = self.tensor(batch.logp), self.tensor(adv), self.tensor(batch.ret)
+        train_actor = self.iterations >= cfg.value_warmup
+        stats: dict[str, list[float]] = {"value_loss": [], "policy_loss": [], "approx_kl": [], "clip_frac": [], "entropy": []}
+        actor_on = train_actor
+        for _ in range(cfg.epochs):
+            perm = torch.as_tensor(self.rng.permutation(n), device=self.device)
+            kls = []
+            for s in range(0, n, cfg.minibatch):
+                b = perm[s : s + cfg.minibatch]
+                v = self.value(obs[b], goal[b])
+                v_loss = ((v - ret[b]) ** 2).mean()
+                self.opt_value.zero_grad(set_to_none=True)
+                v_loss.backward()
+                nn.utils.clip_grad_norm_(self.value.parameters(), cfg.max_grad_norm)
+                self.opt_value.step()
+                stats["value_loss"].append(float(v_loss.detach()))
+                if not actor_on:
+                    continue
+                mean, log_std = self.actor(obs[b], goal[b])
+                logp = gaussian_logp(u[b], mean, log_std)
+                log_ratio = logp - old_logp[b]
+                ratio = log_ratio.exp()
+                surr = torch.min(ratio * adv_t[b], ratio.clamp(1 - cfg.clip, 1 + cfg.clip) * adv_t[b])
+                entropy = (log_std + 0.5 * math.log(2 * math.pi * math.e)).sum(-1).mean()
+                loss = -surr.mean() - cfg.entropy_coef * entropy
+                self.opt_actor.zero_grad(set_to_none=True)
+                loss.backward()
+                nn.utils.clip_grad_norm_(self.actor.parameters(), cfg.max_grad_norm)
+                self.opt_actor.step()
+                with torch.no_grad():
+                    kl = float(((ratio - 1) - log_ratio).mean())  # the k3 estimator of KL(old || new)
+                    kls.append(kl)
+                    stats["approx_kl"].append(kl)
+                    stats["clip_frac"].append(float(((ratio - 1).abs() > cfg.clip).float().mean()))
+                stats["policy_loss"].append(float(loss.detach()))
+                stats["entropy"].append(float(entropy.detach()))
+            if actor_on and cfg.target_kl > 0 and kls and np.mean(kls) > cfg.target_kl:
+                actor_on = False  # the value network finishes its epochs alone
+        self.iterations += 1
+        return {k: float(np.mean(v)) if v else float("nan") for k, v in stats.items()}
+
+    # ------------------------------------------------------------------ validation
+    def validate(self) -> dict[str, float]:
+        from ..planners.policy import ESCAPE_DEFAULTS, rollout_batch
+
+        robot, actor = self.robot, self.actor
+        env = EnvConfig(observation=self.meta["observation"], n_points=self.meta["n_points"], split="val")
+
+        def act(o: np.ndarray, q: np.ndarray, g: np.ndarray, noise: np.ndarray | None = None) -> np.ndarray:
+            with torch.no_grad():
+                mean, log_std = actor(self.tensor(obs_input(robot, o)), self.tensor(goal_input(robot, q, g)))
+                if noise is not None:
+                    mean = mean + log_std.exp() * self.tensor(noise)
+                return torch.tanh(mean).cpu().numpy()
+
+        actor.eval()
+        row: dict[str, float] = {}
+        res = rollout_batch(act, robot, env, self.val_problems, self.scenario.horizon, seed=self.cfg.seed)
+        row["val_success"] = float(np.mean([r.success for r in res]))
+        solved = [r.nodes for r in res if r.success]
+        row["val_steps"] = float(np.mean(solved)) if solved else 0.0
+        escape = ESCAPE_DEFAULTS.get(robot.name)
+        if self.cfg.eval_escape and escape is not None:
+            res = rollout_batch(
+                act, robot, env, self.val_problems, self.scenario.horizon, seed=self.cfg.seed, escape=escape, noise_rng=np.random.default_rng(self.cfg.seed)
+            )
+            row["val_success_escape"] = float(np.mean([r.success for r in res]))
+        actor.train()
+        return row
+
+    # ------------------------------------------------------------------ checkpoints
+    def payload(self) -> dict[str, Any]:
+        return {**self.meta, "actor": self.actor.state_dict(), "horizon": self.scenario.horizon, "ppo_config": to_dict(self.cfg), "env_steps": self.steps}
+
+    def save(self, row: dict[str, float] | None) -> None:
+        payload = self.payload()
+        state = {
+            "value": self.value.state_dict(),
+            "opt_actor": self.opt_actor.state_dict(),
+            "opt_value": self.opt_value.state_dict(),
+            "steps": self.steps,
+            "iterations": self.iterations,
+            "best": self.best,
+            "wall_time_s": self.wall,
+            "rng": self.rng.bit_generator.state,
+            "torch_rng": torch.get_rng_state(),
+        }
+        if row is not None:
+            key = "val_success_escape" if self.cfg.select == "escape" else "val_success"
+            if row[key] > self.best:
+                self.best = row[key]
+                state["best"] = self.best
+                save_checkpoint(self.run_dir / "best.pt", {**payload, "val_success": row["val_success"], **{k: row[k] for k in row if k.startswith("val_")}})
+        save_checkpoint(self.run_dir / "last.pt", {**payload, "ppo": state})
+
+
+def train_ppo(cfg: PPOConfig, run_dir: str | Path, resume: str | Path | None = None, progress: bool = True) -> dict[str, Any]:
+    """Fine-tune ``cfg.init_actor`` (or continue ``resume``'s run) with PPO; checkpoints
+    ``best.pt`` and ``last.pt`` and ``metrics.csv`` in ``run_dir``. Ctrl-C stops after the
+    current iteration and saves the trainer state. Returns a summary."""
+    from .train import _Logger, _StopOnCtrlC
+
+    if not cfg.init_actor and resume is None:
+        raise ValueError("PPO fine-tunes a policy: give init_actor (a checkpoint, e.g. from `pointplan bc`)")
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    run = PPORun(cfg, run_dir, resume)
+    if run.steps >= cfg.total_steps:
+        raise ValueError(f"{resume}: the run has done {run.steps} steps already; set total_steps above that to continue it")
+    logger = _Logger(run_dir)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=cfg.total_steps, initial=run.steps, unit="step", dynamic_ncols=True)
+    if run.steps == 0:  # the starting policy, for the curve
+        row = {"env_steps": 0.0, "iterations": 0.0, "wall_time_s": run.wall, **run.validate()}
+        logger.log(row)
+        run.history.append(row)
+        if bar is not None:
+            bar.write(f"start: {row}")
+    with _StopOnCtrlC(enabled=True) as ctrl_c:
+        while run.steps < cfg.total_steps and not ctrl_c.requested:
+            before = run.steps
+            batch = run.collect()
+            losses = run.update(batch)
+            if bar is not None:
+                bar.update(run.steps - before)
+                bar.set_postfix(train_success=f"{np.mean(run.recent) if run.recent else 0:.2f}", best=f"{max(run.best, 0):.3f}")
+            if run.steps >= run.next_eval or run.steps >= cfg.total_steps:
+                run.next_eval += cfg.eval_every
+                row = {"env_steps": float(run.steps), "iterations": float(run.iterations), "wall_time_s": run.wall}
+                row.update(run.validate())
+                row["train_success"] = float(np.mean(run.recent)) if run.recent else 0.0
+                row.update(losses)
+                logger.log(row)
+                run.history.append(row)
+                run.save(row)
+                if bar is not None:
+                    bar.write(" ".join(f"{k}={v:.4g}" for k, v in row.items()))
+    if bar is not None:
+        bar.close()
+    if ctrl_c.requested:
+        run.save(None)
+        print(f"\ninterrupted at step {run.steps}: trainer state saved to {run_dir / 'last.pt'} (continue with --resume)", file=sys.stderr)
+    return {"run_dir": str(run_dir), "best_success": run.best, "steps": run.steps, "wall_time_s": run.wall, "interrupted": ctrl_c.requested}
