@@ -353,3 +353,34 @@ def test_local_near_keeps_the_nearest_thinned_hits(robot: str) -> None:
     near.bind([problem.scene])
     obs = near.observe(problem.start[None], np.random.default_rng(0))[0]
     assert len(np.unique(obs.round(6), axis=0)) == thin_grid(*near.cast(problem.start[None]), near.spacing)[0].sum()
+
+
+def test_local_wide_sees_through_slots_opening_and_its_points_lie_on_surfaces() -> None:
+    from pointplan.observers import make_observer
+    from pointplan.observers.rays import wall_slabs
+
+    sc = make_scenario("slot", robot="sshape")
+    r = sc.robot
+    wide, local = make_observer("local-wide", r), make_observer("local", r)
+    assert wide.space.shape == (128, 6) and len(wide.body_dirs) == 6 * (1024 // 6)
+    behind = {"wide": 0, "local": 0}
+    for i in range(8):
+        problem = sc.problem("val", i)
+        q = problem.start[None]
+        boxes = list(problem.scene.obstacles) + wall_slabs(problem.scene.low, problem.scene.high)
+        for name, obs_ in (("wide", wide), ("local", local)):
+            obs_.bind([problem.scene])
+            obs = obs_.observe(q, np.random.default_rng(i))[0]
+            pts = np.einsum("ij,nj->ni", r.rotations(q[0]), obs[:, :3]) + r.positions(q[0])
+            # every point is on the surface of a box (axis-aligned here): closed-form
+            # signed distance, independent of the ray caster
+            d = np.full(len(pts), np.inf)
+            for b in boxes:
+                assert np.allclose(b.rotation, np.eye(3))
+                e = np.abs(pts - b.center) - b.size / 2
+                sd = np.linalg.norm(np.maximum(e, 0.0), axis=1) + np.minimum(e.max(axis=1), 0.0)
+                d = np.minimum(d, np.abs(sd))
+            assert d.max() < 1e-6
+            # the start is on the x < -0.3 side: a point beyond the wall was seen through the opening
+            behind[name] += int(np.sum(pts[:, 0] > 0.03))
+    assert behind["wide"] > 0 and behind["local"] == 0

@@ -329,8 +329,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     from .viz.plot3d import render_problem_3d, render_rollout_gif
 
     observation = args.observation or "global"
-    if observation not in ("global", "local"):
-        raise CLIError(f"3D scenes are observed as 'global' or 'local', not {observation!r}")
+    if observation not in ("global", "local", "local-near", "local-wide"):
+        raise CLIError(f"3D scenes are observed as 'global', 'local', 'local-near' or 'local-wide', not {observation!r}")
     path = result.path if result is not None and len(result.path) else None
     pts, nrm = world_observation(problem, robot, observation, args.n_points, problem.start, 0, args.seed)
     title = f"{problem.tag}  ({observation} observation)"

@@ -10,7 +10,7 @@ from ..robots.base import Robot
 from .base import Observer, PointSetObserver
 from .image import OccupancyImage
 from .points import GlobalPoints, InteriorPoints, SurfaceNormals, SurfacePoints
-from .rays import LocalRays, NearestRays
+from .rays import LocalRays, NearestRays, WideRays
 
 OBSERVERS: dict[str, type[Observer]] = {
     "surface": SurfacePoints,
@@ -20,12 +20,13 @@ OBSERVERS: dict[str, type[Observer]] = {
     "global": GlobalPoints,
     "local": LocalRays,
     "local-near": NearestRays,
+    "local-wide": WideRays,
 }
 
 
 def make_observer(name: str, robot: Robot, **kwargs: Any) -> Observer:
     """An observer by name: ``surface``, ``surface-normals``, ``interior``, ``image`` (2D) or
-    ``global``, ``local`` (3D)."""
+    ``global``, ``local``, ``local-near``, ``local-wide`` (3D)."""
     try:
         cls = OBSERVERS[name]
     except KeyError:
@@ -51,6 +52,7 @@ __all__ = [
     "InteriorPoints",
     "LocalRays",
     "NearestRays",
+    "WideRays",
     "Observer",
     "OccupancyImage",
     "PointSetObserver",
