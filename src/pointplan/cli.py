@@ -613,6 +613,7 @@ BC_OPTIONS = {
     "expert-max-nodes": "max_nodes",
     "expert-attempts": "bc.expert_attempts",
     "expert-margin": "bc.expert_margin",
+    "expert": "expert",
 }
 
 
@@ -637,6 +638,14 @@ def cmd_bc(args: argparse.Namespace) -> int:
     if args.dagger_rounds or args.resume:
         run_dir = args.run_dir or (str(Path(args.resume).parent) if args.resume else "runs/latest")
         summary = train_dagger(cfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume)
+    elif cfg.expert == "slot-threading":
+        from .learning.dagger import first_demos
+        from .scenes.scenarios import make_scenario
+
+        run_dir = Path(args.run_dir or "runs/latest")
+        run_dir.mkdir(parents=True, exist_ok=True)
+        demos = first_demos(cfg, make_scenario(cfg.bc.env, robot=cfg.bc.robot), Path(cfg.bc.demos_file or run_dir / "demos.npz"), not args.quiet)
+        summary = train_bc(cfg.bc, run_dir, progress=not args.quiet, demos=demos)
     else:
         summary = train_bc(cfg.bc, args.run_dir or "runs/latest", progress=not args.quiet)
     print(_bc_line(summary))

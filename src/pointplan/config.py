@@ -120,7 +120,8 @@ def add_config_options(parser: argparse.ArgumentParser, defaults: Any, paths: di
 
     ``paths`` maps each flag (without dashes) to a dotted field path (``"lr": "sac.lr"``).
     Types, help and the default shown come from the dataclass (integers are at least 0, or
-    at least ``field(metadata={"min": ...})``); the parsed value is ``None`` when the
+    at least ``field(metadata={"min": ...})``; ``metadata={"choices": (...)}`` limits the
+    values); the parsed value is ``None`` when the
     option is not given, so :func:`given_options` sees what the user set.
     """
     for flag, path in paths.items():
@@ -135,7 +136,9 @@ def add_config_options(parser: argparse.ArgumentParser, defaults: Any, paths: di
         if kind is bool:
             parser.add_argument(f"--{flag}", dest=path, action=argparse.BooleanOptionalAction, default=None, help=text)
         else:
-            parser.add_argument(f"--{flag}", dest=path, type=parse, default=None, metavar=flag.upper().replace("-", "_"), help=text)
+            choices = meta.get("choices")
+            metavar = "{" + ",".join(choices) + "}" if choices else flag.upper().replace("-", "_")
+            parser.add_argument(f"--{flag}", dest=path, type=parse, default=None, choices=choices, metavar=metavar, help=text)
 
 
 def given_options(args: argparse.Namespace, paths: dict[str, str]) -> dict[str, Any]:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -60,6 +61,10 @@ class DaggerConfig:
     eval_episodes: int = field(default=200, metadata={"min": 1})
     #: Bi-RRT node budget of the expert
     max_nodes: int = field(default=20000, metadata={"min": 1})
+    #: who labels: ``birrt`` (Bi-RRT from the state reached to the goal) or ``slot-threading``
+    #: (Slot scenes only: one threading of every slot, :mod:`pointplan.planners.slot_threading`;
+    #: it also plans the first demonstrations when there is no demonstrations file)
+    expert: str = field(default="birrt", metadata={"choices": ("birrt", "slot-threading")})
 
 
 def _rollout_index(seed: int, rnd: int, rollouts: int, i: int) -> int:
@@ -113,11 +118,42 @@ def _resume(path: str | Path, device: str, actor: Actor, opt: torch.optim.Optimi
     return dict(d)
 
 
-def _first_demos(b: BCConfig, scenario: Scenario, demos_path: Path, progress: bool) -> Demos:
-    """The cloning demonstrations (from ``b.demos_file`` when it exists, else planned), also
-    written to the run's ``demos.npz``."""
+def _threading_labels(scenario: Scenario, labels: Sequence[tuple[int, int, np.ndarray | None]], progress: bool, desc: str) -> list[tuple[int, np.ndarray]]:
+    """The slot threading expert's paths, cut into policy steps, for ``(problem index in the
+    training split, planner seed, start or None)``; the unsolved ones are left out. It takes
+    milliseconds a query, so it runs here, not in workers."""
+    from ..planners.slot_threading import SlotThreading
+    from .bc import resample_path
+
+    expert = SlotThreading.load(scenario.robot)
+    out = []
+    it = labels
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(labels, desc=desc, unit="label")
+    for index, seed, start in it:
+        problem = scenario.problem("train", index, seed=seed)
+        path = expert.plan(problem, start, seed=index)
+        if path is not None and len(path) > 1:
+            out.append((index, resample_path(scenario.robot, path)))
+    return out
+
+
+def first_demos(cfg: DaggerConfig, scenario: Scenario, demos_path: Path, progress: bool) -> Demos:
+    """The cloning demonstrations (from ``cfg.bc.demos_file`` when it exists, else planned by
+    ``cfg.expert``), also written to ``demos_path``."""
+    b = cfg.bc
     source = b.demos_file if b.demos_file and Path(b.demos_file).exists() else None
-    demos = load_demos(source, scenario) if source else generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address)
+    if source:
+        demos = load_demos(source, scenario)
+    elif cfg.expert == "slot-threading":
+        from .bc import _demo_index
+
+        jobs = [(_demo_index(b.seed, b.n_problems, i), b.seed, None) for i in range(b.n_problems)]
+        demos = demos_from_paths(scenario, "train", b.seed, _threading_labels(scenario, jobs, progress, "demonstrations"))
+    else:
+        demos = generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address)
     save_demos(demos_path, scenario, demos, "train", b.seed)
     return demos
 
@@ -141,6 +177,9 @@ def _roll_out_and_label(
     probs = [scenario.problem("train", _rollout_index(b.seed, rnd, cfg.rollouts, i), seed=b.seed) for i in range(cfg.rollouts)]
     results = rollout_batch(policy, scenario.robot, env, probs, scenario.horizon, seed=b.seed * 1000 + rnd)
     jobs = _label_jobs(cfg, scenario, rnd, results)
+    if cfg.expert == "slot-threading":
+        labels = [(j[3], j[4], j[7]) for j in jobs]
+        return results, _threading_labels(scenario, labels, progress, f"round {rnd + 1}: expert labels")
     return results, plan_demos(jobs, pool, progress, desc=f"round {rnd + 1}: expert labels")
 
 
@@ -177,7 +216,7 @@ def train_dagger(
         env_steps = int(d["env_steps"])
         demos = load_demos(demos_path, scenario)
     else:
-        demos = _first_demos(b, scenario, demos_path, progress)
+        demos = first_demos(cfg, scenario, demos_path, progress)
         if init_actor:
             actor.load_state_dict(load_checkpoint(init_actor, b.device)["actor"])
         else:

@@ -244,11 +244,20 @@ class SlotScenario(Scenario3D):
         c = self.slot
         width = float(rng.uniform(c.min_width_bars, c.max_width_bars)) * BAR_THICKNESS
         long_axis = int(rng.integers(1, 3))  # 1: slot long along y, 2: along z
+        mid = np.zeros(3)
+        mid[1:] = rng.uniform(-c.center_range, c.center_range, 2)
+        return self.wall(width, mid, long_axis)
+
+    def wall(self, width: float, mid: Array, long_axis: int) -> Scene:
+        """The scene of a slot ``width`` wide (metres) centred at ``mid`` (its x is ignored),
+        long along y (``long_axis`` 1) or z (2)."""
+        if long_axis not in (1, 2):
+            raise ValueError(f"long_axis must be 1 (y) or 2 (z), not {long_axis}")
+        c = self.slot
         ext = np.zeros(3)
         ext[long_axis] = c.slot_length
         ext[3 - long_axis] = width
-        mid = np.zeros(3)
-        mid[1:] = rng.uniform(-c.center_range, c.center_range, 2)
+        mid = np.array([0.0, float(mid[1]), float(mid[2])])
         e, t = HALF_EXTENT, c.wall_thickness
         boxes = []
         lo, hi = mid - ext / 2, mid + ext / 2
@@ -258,7 +267,7 @@ class SlotScenario(Scenario3D):
         for a, b in ((-e, lo[2]), (hi[2], e)):
             boxes.append(Box(np.array([0.0, mid[1], (a + b) / 2]), np.array([t, hi[1] - lo[1], b - a])))
         scene = Scene(boxes, LOW, HIGH)
-        scene.__dict__["slot"] = {"width": width, "center": mid, "long_axis": long_axis}
+        scene.__dict__["slot"] = {"width": float(width), "center": mid, "long_axis": long_axis}
         return scene
 
     def sample_problem(self, scene: Scene, rng: np.random.Generator) -> tuple[Array, Array]:

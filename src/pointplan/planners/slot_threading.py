@@ -1,0 +1,111 @@
+"""A privileged expert for Slot: one threading of the slot, placed on every slot.
+
+Demonstrations from Bi-RRT thread each slot in their own way, and a policy cloned from them
+averages the ways (``docs/learning.md``). This expert always threads the same way. Its
+*template* is a path through a reference slot (centred, long along y, ``width_bars`` bar
+thicknesses wide), planned once by ``scripts/slot_canonical_expert.py template`` (the
+guided sweep, simplified, certified) and shipped as ``data/slot_threading.npz``. It serves
+every slot at least that wide:
+
+- a slot centred elsewhere is the reference wall moved along itself: move the template;
+- a slot long along z is the reference turned 90 degrees about x: turn the template;
+- a wider opening at the same centre leaves less wall: a path free in the narrow slot is
+  free in the wide one.
+
+A path from a configuration ``q`` (the problem's start, or a state a policy reached, for
+DAgger) is: a certified straight edge from ``q`` to the last template pose in the opening
+it reaches, or else to the template's first pose (0.3 before the wall; Bi-RRT where the
+straight edge collides), the template on from there, and a straight edge (or Bi-RRT) to
+the goal. The expert reads the slot's width, centre and long axis from the scene: it is for
+demonstrations, not a planner for unknown scenes.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..robots.base import Robot
+from ..robots.sshape import BAR_THICKNESS
+from ..scenes.scene import Problem
+from .birrt import BiRRT
+from .edges import edge_free
+
+#: the turn that takes a slot long along y to one long along z (90 degrees about x)
+TURN = Rotation.from_euler("x", 90, degrees=True)
+
+
+class SlotThreading:
+    """The expert of one template (``(N, 7)`` poses in the reference slot, the first before
+    the wall, the last past it)."""
+
+    def __init__(self, robot: Robot, template: np.ndarray, width_bars: float, max_nodes: int = 2000) -> None:
+        template = np.asarray(template, np.float64)
+        if template.ndim != 2 or template.shape[1] != robot.config_dim or len(template) < 2:
+            raise ValueError(f"a template is (N >= 2, {robot.config_dim}) poses, not {template.shape}")
+        self.robot, self.template, self.width_bars, self.max_nodes = robot, template, float(width_bars), int(max_nodes)
+
+    @classmethod
+    def load(cls, robot: Robot, path: str | Path | None = None, max_nodes: int = 2000) -> SlotThreading:
+        """The template in ``path`` (``np.savez`` with ``poses`` and ``width_bars``), by
+        default the one shipped in the package."""
+        if path is None:
+            with resources.as_file(resources.files("pointplan") / "data" / "slot_threading.npz") as f:
+                return cls.load(robot, f, max_nodes)
+        with np.load(Path(path)) as z:
+            return cls(robot, np.array(z["poses"]), float(z["width_bars"]), max_nodes)
+
+    def threads(self, slot: dict) -> bool:
+        """Is the slot at least as wide as the template's?"""
+        return float(slot["width"]) / BAR_THICKNESS >= self.width_bars - 1e-9
+
+    def place(self, slot: dict) -> np.ndarray:
+        """The template moved (and turned) onto ``slot`` (the scene's ``slot`` entry)."""
+        out = self.template.copy()
+        if int(slot["long_axis"]) == 2:
+            out[:, :3] = TURN.apply(out[:, :3])
+            out[:, 3:] = (TURN * Rotation.from_quat(out[:, 3:])).as_quat()
+        out[:, 1:3] += np.asarray(slot["center"], np.float64)[1:3]
+        return out
+
+    def _connect(self, problem: Problem, a: np.ndarray, b: np.ndarray, seed: int) -> np.ndarray | None:
+        if edge_free(self.robot, problem, a, b)[0]:
+            return np.array([a, b])
+        r = BiRRT(self.robot, seed=seed, max_nodes=self.max_nodes).plan(Problem(problem.scene, a, b))
+        return np.asarray(r.path) if r.success else None
+
+    def plan(self, problem: Problem, start: np.ndarray | None = None, seed: int = 0) -> np.ndarray | None:
+        """A path from ``start`` (default: the problem's) to the problem's goal that threads
+        the slot the template's way, or ``None`` (a slot narrower than the template, or no
+        way found to join it). The path is not re-checked here: its edges are certified by
+        :func:`edge_free` and Bi-RRT; the evaluator's ``check_path`` is the independent check."""
+        slot = problem.scene.__dict__.get("slot")
+        if slot is None:
+            raise ValueError("the slot threading expert needs a Slot scene (its scene has no 'slot' entry)")
+        if not self.threads(slot):
+            return None
+        q = np.asarray(problem.start if start is None else start, np.float64)
+        t = self.place(slot)
+        goal = np.asarray(problem.goal, np.float64)
+        # already past the wall: straight to the goal if that is free
+        if edge_free(self.robot, problem, q, goal)[0]:
+            return np.array([q, goal])
+        head, rest = None, t[1:]
+        for k in range(len(t) - 1, 0, -1):  # the last template pose a straight edge reaches
+            # the first pose in the opening only from nearer than the approach pose: from
+            # farther, the approach (pose 0, then straight along x) is the canonical way in
+            near = k > 1 or np.linalg.norm(q[:3] - t[1, :3]) <= np.linalg.norm(t[0, :3] - t[1, :3])
+            if near and edge_free(self.robot, problem, q, t[k])[0]:
+                head, rest = np.array([q, t[k]]), t[k + 1 :]
+                break
+        if head is None:
+            head = self._connect(problem, q, t[0], seed)
+            if head is None:
+                return None
+        tail = self._connect(problem, t[-1], goal, seed + 1)
+        if tail is None:
+            return None
+        return np.concatenate([head, rest, tail[1:]])

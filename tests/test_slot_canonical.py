@@ -1,0 +1,106 @@
+"""scripts/slot_canonical_expert.py: one threading, planned once in a reference slot, placed
+on other slots (moved, turned, wider), and its demonstrations. Each path is checked by the
+evaluator's certified check and, independently, by coal's signed distance at dense poses."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pointplan.evaluation.evaluate import check_path, densify
+from pointplan.robots.sshape import BAR_THICKNESS
+from pointplan.scenes.scenarios import make_scenario
+from pointplan.scenes.scene import Problem
+
+ROOT = Path(__file__).resolve().parents[1]
+TEMPLATE = ROOT / "docs" / "data" / "slot" / "canonical_template.npz"
+
+
+def _module(name: str):  # type: ignore[no-untyped-def]
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _coal_min_clearance(sweep_mod, robot, problem: Problem, path: np.ndarray) -> float:  # type: ignore[no-untyped-def]
+    """Smallest coal signed distance between the S-shape and the wall at poses 2 mm apart."""
+    clear = sweep_mod.WallClearance(robot, problem)
+    qs = densify(robot, path, 0.002)
+    rots = robot.rotations(qs)
+    return min(clear(r, q[:3]) for r, q in zip(rots, qs, strict=True))
+
+
+@pytest.fixture(scope="module")
+def canon():  # type: ignore[no-untyped-def]
+    return _module("slot_canonical_expert")
+
+
+def test_template_threads_moved_turned_and_wider_slots_but_not_a_narrower_one(canon) -> None:  # type: ignore[no-untyped-def]
+    sweep_mod = _module("slot_sweep_expert")
+    template, w0 = canon.load_template(TEMPLATE)
+    sc = make_scenario("slot", "sshape")
+    robot = sc.robot
+    rng = np.random.default_rng(3)
+    for long_axis in (1, 2):
+        width = rng.uniform(w0, 8.0) * BAR_THICKNESS
+        mid = np.array([0.0, *rng.uniform(-0.15, 0.15, 2)])
+        scene = _wall(width, mid, long_axis)
+        path = canon.place(template, scene.__dict__["slot"])
+        problem = Problem(scene, path[0], path[-1])
+        # it goes through the wall: from well before it to well past it
+        assert path[0, 0] < -0.2 and path[-1, 0] > 0.2
+        assert check_path(robot, problem, path)
+        assert _coal_min_clearance(sweep_mod, robot, problem, path) > 0.0
+    # in a slot narrower than the template's, the same threading collides
+    narrow = _wall(0.8 * w0 * BAR_THICKNESS, np.zeros(3), 1)
+    path = canon.place(template, narrow.__dict__["slot"])
+    problem = Problem(narrow, path[0], path[-1])
+    assert not check_path(robot, problem, path)
+    assert _coal_min_clearance(sweep_mod, robot, problem, path) < 0.0
+
+
+def _wall(width: float, mid: np.ndarray, long_axis: int):  # type: ignore[no-untyped-def]
+    from pointplan.scenes.scenes3d import SlotScenario
+
+    return SlotScenario("sshape").wall(width, mid, long_axis)
+
+
+def test_wall_matches_the_scenario_and_refuses_a_bad_axis() -> None:
+    sc = make_scenario("slot", "sshape")
+    p = sc.problem("val", 2, seed=0)
+    slot = p.scene.__dict__["slot"]
+    again = _wall(slot["width"], slot["center"], slot["long_axis"])
+    for a, b in zip(p.scene.obstacles, again.obstacles, strict=True):
+        assert np.allclose(a.center, b.center) and np.allclose(a.size, b.size)
+    with pytest.raises(ValueError, match="long_axis"):
+        _wall(0.1, np.zeros(3), 0)
+
+
+def test_demonstrations_start_at_the_start_reach_the_goal_and_are_free(canon, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from pointplan.learning.bc import load_demos
+
+    out = tmp_path / "demos.npz"
+    import sys
+
+    argv = sys.argv
+    sys.argv = ["x", "demos", "--template", str(TEMPLATE), "--save-demos", str(out), "--problems", "6", "--demo-n", "6"]
+    try:
+        canon.main()
+    finally:
+        sys.argv = argv
+    sc = make_scenario("slot", "sshape")
+    demos = load_demos(out, sc)
+    _, w0 = canon.load_template(TEMPLATE)
+    indices = [1_000_000 + k for k in range(6)]  # bc._demo_index(seed 0, n 6, k)
+    wide = [k for k in indices if sc.problem("train", k, seed=0).scene.__dict__["slot"]["width"] / BAR_THICKNESS >= w0]
+    assert len(wide) >= 3
+    assert sorted(k for k, _ in demos.paths) == sorted(wide)
+    for k, path in demos.paths:
+        p = sc.problem("train", k, seed=0)
+        assert np.allclose(path[0], p.start)
+        assert check_path(sc.robot, p, path)
