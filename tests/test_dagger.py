@@ -70,3 +70,28 @@ def test_dagger_rounds_add_expert_labels_and_resume(tmp_path: Path) -> None:
     assert [r.split(",")[0] for r in rows[1:]] == ["1", "2", "3"]
     assert len(load_demos(tmp_path / "demos.npz", Narrow2DScenario())) >= len(first)
     assert Policy.from_checkpoint(tmp_path / "best.pt").observation == "surface-normals"
+
+
+def test_dagger_with_the_slot_threading_expert_plans_its_own_demos_and_labels(tmp_path: Path) -> None:
+    """``expert="slot-threading"``: the first demonstrations and the labels of failed rollouts
+    come from the slot threading expert; each label starts where the policy was and is a
+    certified path to the goal."""
+    from pointplan.evaluation.evaluate import check_path
+    from pointplan.scenes.scenarios import make_scenario
+    from pointplan.scenes.scene import Problem
+
+    bc = BCConfig(env="slot", robot="sshape", observation="global", n_points=32, n_problems=3, epochs=1, net=SMALL, refresh_every=0)
+    cfg = DaggerConfig(bc, rounds=1, rollouts=2, labels_per_failure=2, epochs_per_round=1, eval_episodes=2, expert="slot-threading")
+    train_dagger(cfg, tmp_path, progress=False)
+    sc = make_scenario("slot", robot="sshape")
+    demos = load_demos(tmp_path / "demos.npz", sc)
+    rows = (tmp_path / "metrics.csv").read_text().splitlines()
+    labels = int(rows[1].split(",")[3])
+    assert labels > 0  # a policy cloned from a few demonstrations fails Slot
+    assert len(demos.paths) >= 1 + labels
+    from_starts = 0
+    for k, path in demos.paths:
+        p = sc.problem("train", k, seed=0)
+        from_starts += bool(np.allclose(path[0], p.start))
+        assert check_path(sc.robot, Problem(p.scene, path[0], p.goal), path)
+    assert from_starts < len(demos.paths)  # the labels start elsewhere

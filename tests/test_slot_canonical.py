@@ -1,6 +1,8 @@
-"""scripts/slot_canonical_expert.py: one threading, planned once in a reference slot, placed
-on other slots (moved, turned, wider), and its demonstrations. Each path is checked by the
-evaluator's certified check and, independently, by coal's signed distance at dense poses."""
+"""The slot threading expert (pointplan.planners.slot_threading, its template planned by
+scripts/slot_canonical_expert.py): one threading, planned once in a reference slot, placed
+on other slots (moved, turned, wider), its demonstrations and its DAgger labels. Each path
+is checked by the evaluator's certified check and, independently, by coal's signed
+distance at dense poses."""
 
 from __future__ import annotations
 
@@ -11,12 +13,12 @@ import numpy as np
 import pytest
 
 from pointplan.evaluation.evaluate import check_path, densify
+from pointplan.planners.slot_threading import SlotThreading
 from pointplan.robots.sshape import BAR_THICKNESS
 from pointplan.scenes.scenarios import make_scenario
 from pointplan.scenes.scene import Problem
 
 ROOT = Path(__file__).resolve().parents[1]
-TEMPLATE = ROOT / "docs" / "data" / "slot" / "canonical_template.npz"
 
 
 def _module(name: str):  # type: ignore[no-untyped-def]
@@ -35,22 +37,19 @@ def _coal_min_clearance(sweep_mod, robot, problem: Problem, path: np.ndarray) ->
     return min(clear(r, q[:3]) for r, q in zip(rots, qs, strict=True))
 
 
-@pytest.fixture(scope="module")
-def canon():  # type: ignore[no-untyped-def]
-    return _module("slot_canonical_expert")
-
-
-def test_template_threads_moved_turned_and_wider_slots_but_not_a_narrower_one(canon) -> None:  # type: ignore[no-untyped-def]
+def test_template_threads_moved_turned_and_wider_slots_but_not_a_narrower_one() -> None:
     sweep_mod = _module("slot_sweep_expert")
-    template, w0 = canon.load_template(TEMPLATE)
     sc = make_scenario("slot", "sshape")
     robot = sc.robot
+    expert = SlotThreading.load(robot)
+    w0 = expert.width_bars
+    assert 2.0 <= w0 < 2.5
     rng = np.random.default_rng(3)
     for long_axis in (1, 2):
         width = rng.uniform(w0, 8.0) * BAR_THICKNESS
         mid = np.array([0.0, *rng.uniform(-0.15, 0.15, 2)])
         scene = _wall(width, mid, long_axis)
-        path = canon.place(template, scene.__dict__["slot"])
+        path = expert.place(scene.__dict__["slot"])
         problem = Problem(scene, path[0], path[-1])
         # it goes through the wall: from well before it to well past it
         assert path[0, 0] < -0.2 and path[-1, 0] > 0.2
@@ -58,7 +57,7 @@ def test_template_threads_moved_turned_and_wider_slots_but_not_a_narrower_one(ca
         assert _coal_min_clearance(sweep_mod, robot, problem, path) > 0.0
     # in a slot narrower than the template's, the same threading collides
     narrow = _wall(0.8 * w0 * BAR_THICKNESS, np.zeros(3), 1)
-    path = canon.place(template, narrow.__dict__["slot"])
+    path = expert.place(narrow.__dict__["slot"])
     problem = Problem(narrow, path[0], path[-1])
     assert not check_path(robot, problem, path)
     assert _coal_min_clearance(sweep_mod, robot, problem, path) < 0.0
@@ -81,26 +80,48 @@ def test_wall_matches_the_scenario_and_refuses_a_bad_axis() -> None:
         _wall(0.1, np.zeros(3), 0)
 
 
-def test_demonstrations_start_at_the_start_reach_the_goal_and_are_free(canon, tmp_path) -> None:  # type: ignore[no-untyped-def]
-    from pointplan.learning.bc import load_demos
-
-    out = tmp_path / "demos.npz"
+def test_demonstrations_start_at_the_start_reach_the_goal_and_are_free(tmp_path) -> None:  # type: ignore[no-untyped-def]
     import sys
 
+    from pointplan.learning.bc import load_demos
+
+    canon = _module("slot_canonical_expert")
+    out = tmp_path / "demos.npz"
     argv = sys.argv
-    sys.argv = ["x", "demos", "--template", str(TEMPLATE), "--save-demos", str(out), "--problems", "6", "--demo-n", "6"]
+    sys.argv = ["x", "demos", "--save-demos", str(out), "--problems", "6", "--demo-n", "6"]
     try:
         canon.main()
     finally:
         sys.argv = argv
     sc = make_scenario("slot", "sshape")
     demos = load_demos(out, sc)
-    _, w0 = canon.load_template(TEMPLATE)
+    expert = SlotThreading.load(sc.robot)
     indices = [1_000_000 + k for k in range(6)]  # bc._demo_index(seed 0, n 6, k)
-    wide = [k for k in indices if sc.problem("train", k, seed=0).scene.__dict__["slot"]["width"] / BAR_THICKNESS >= w0]
+    wide = [k for k in indices if expert.threads(sc.problem("train", k, seed=0).scene.__dict__["slot"])]
     assert len(wide) >= 3
     assert sorted(k for k, _ in demos.paths) == sorted(wide)
     for k, path in demos.paths:
         p = sc.problem("train", k, seed=0)
         assert np.allclose(path[0], p.start)
         assert check_path(sc.robot, p, path)
+
+
+def test_labels_from_states_inside_the_slot_go_on_from_there() -> None:
+    """A DAgger label from a pose halfway through the slot joins the template there (it does
+    not back out to the approach), and is free to the goal."""
+    sc = make_scenario("slot", "sshape")
+    expert = SlotThreading.load(sc.robot)
+    k = next(k for k in range(1_000_000, 1_000_050) if expert.threads(sc.problem("train", k, seed=0).scene.__dict__["slot"]))
+    p = sc.problem("train", k, seed=0)
+    t = expert.place(p.scene.__dict__["slot"])
+    mid = len(t) // 2
+    path = expert.plan(p, start=t[mid], seed=1)
+    assert path is not None
+    assert np.allclose(path[0], t[mid])
+    # every pose after the start is one of the template's later ones, or on the way to the goal
+    assert not any(np.allclose(q, t[j]) for q in path[1:] for j in range(mid))
+    assert check_path(sc.robot, Problem(p.scene, t[mid], p.goal), path)
+    # a scene without a slot is refused with a clear error
+    other = make_scenario("boxes3d", "sshape").problem("val", 0, seed=0)
+    with pytest.raises(ValueError, match="Slot scene"):
+        expert.plan(other)
