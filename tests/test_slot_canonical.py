@@ -125,3 +125,18 @@ def test_labels_from_states_inside_the_slot_go_on_from_there() -> None:
     other = make_scenario("boxes3d", "sshape").problem("val", 0, seed=0)
     with pytest.raises(ValueError, match="Slot scene"):
         expert.plan(other)
+
+
+def test_slotfixed_keeps_the_opening_centred_and_long_along_y_and_slot_is_unchanged() -> None:
+    fixed = make_scenario("slotfixed", "sshape")
+    widths = []
+    for p in fixed.problems("val", 8, seed=0):
+        slot = p.scene.__dict__["slot"]
+        assert slot["long_axis"] == 1 and np.allclose(slot["center"], 0.0)
+        widths.append(slot["width"] / BAR_THICKNESS)
+    assert 2.0 <= min(widths) < max(widths) <= 8.0
+    # Slot's own draws did not move when the variant was added (values from before it)
+    slot = make_scenario("slot", "sshape").problem("val", 3, seed=0).scene.__dict__["slot"]
+    assert slot["long_axis"] == 1
+    assert np.isclose(slot["width"], 0.21244264810153043)
+    assert np.allclose(slot["center"], [0.0, 0.04448986, -0.14577895])

@@ -20,6 +20,7 @@ ENV_IDS = {
     "dynamic3d": "pointplan/Dynamic3D-v0",
     "slot": "pointplan/Slot-v0",
     "slotwide": "pointplan/SlotWide-v0",
+    "slotfixed": "pointplan/SlotFixed-v0",
     "qureshi3d": "pointplan/Qureshi3D-v0",
 }
 

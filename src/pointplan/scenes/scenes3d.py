@@ -223,6 +223,8 @@ class SlotConfig:
     wall_thickness: float = 0.04
     #: the slot's centre is uniform in [-c, c] along the wall's two axes
     center_range: float = 0.15
+    #: the axes its long side may lie along (1: y, 2: z), drawn uniformly
+    long_axes: tuple[int, ...] = (1, 2)
     #: start and goal positions are this far from the wall at least (along x): more than the
     #: S-shape's reach from its frame (0.29), so its whole body is on its side
     side_gap: float = 0.3
@@ -244,6 +246,8 @@ class SlotScenario(Scenario3D):
         c = self.slot
         width = float(rng.uniform(c.min_width_bars, c.max_width_bars)) * BAR_THICKNESS
         long_axis = int(rng.integers(1, 3))  # 1: slot long along y, 2: along z
+        if tuple(c.long_axes) != (1, 2):
+            long_axis = int(c.long_axes[(long_axis - 1) % len(c.long_axes)])
         mid = np.zeros(3)
         mid[1:] = rng.uniform(-c.center_range, c.center_range, 2)
         return self.wall(width, mid, long_axis)
@@ -291,6 +295,17 @@ class SlotWideScenario(SlotScenario):
 
     def __init__(self, robot: str | Robot | None = None, config: SlotConfig | None = None) -> None:
         super().__init__(robot, config or SlotConfig(min_width_bars=4.0))
+
+
+class SlotFixedScenario(SlotScenario):
+    """Slot with the opening always centred in the wall and long along y, only its width
+    varying (2-8 bars), as in the classic problem the paper takes Slot from: a policy need not
+    find the opening, only thread it. Its workspaces are drawn from their own stream."""
+
+    name = "slotfixed"
+
+    def __init__(self, robot: str | Robot | None = None, config: SlotConfig | None = None) -> None:
+        super().__init__(robot, config or SlotConfig(center_range=0.0, long_axes=(1,)))
 
 
 #: 3D-Qureshi obstacle centres and sizes (full sides), after the "complex 3D" environments
@@ -360,5 +375,6 @@ SCENARIOS_3D: dict[str, Callable[..., Scenario]] = {
     "dynamic3d": Dynamic3DScenario,
     "slot": SlotScenario,
     "slotwide": SlotWideScenario,
+    "slotfixed": SlotFixedScenario,
     "qureshi3d": Qureshi3DScenario,
 }

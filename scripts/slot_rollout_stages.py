@@ -1,0 +1,94 @@
+"""Where a Slot policy's rollouts fail, against the slot threading expert's template.
+
+For each validation problem the policy is rolled out (the planner, mean action, no escape
+unless ``--escape``), the template is placed on the problem's slot, and the rollout is
+sorted by the last stage it reached:
+
+- ``approach``: it never came within ``--pos`` (position) and ``--rot`` (degrees) of the
+  template's insertion pose (the first pose with the leading bar in the opening);
+- ``insertion``: it came there but its frame never got past the wall (x > 0);
+- ``exit``: past the wall, but not to the goal;
+- ``solved``.
+
+Also reported: at the visited state nearest (in position) to the insertion pose, how far
+it was and by how much it was turned, and how many of those turns were 60-120 degrees
+(the slot's long axis taken for the other one).
+
+    python scripts/slot_rollout_stages.py runs/bc_slot_local/bc.pt --episodes 50
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+import torch
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("checkpoint")
+    ap.add_argument("--episodes", type=int, default=50)
+    ap.add_argument("--env", default="slot", choices=["slot", "slotwide", "slotfixed"])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--escape", type=int, default=0, help="the planner's escape steps (default: 0, the mean action alone)")
+    ap.add_argument("--pos", type=float, default=0.05, help="metres from the insertion pose that count as reaching it")
+    ap.add_argument("--rot", type=float, default=20.0, help="degrees from the insertion pose that count as reaching it")
+    ap.add_argument("--json", help="write the counts and the per-problem rows here")
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    from tqdm import tqdm
+
+    from pointplan.models.policy import Policy
+    from pointplan.planners.policy import PolicyPlanner
+    from pointplan.planners.slot_threading import SlotThreading
+    from pointplan.robots.sshape import BAR_THICKNESS
+    from pointplan.scenes.scenarios import make_scenario
+
+    policy = Policy.from_checkpoint(args.checkpoint)
+    sc = make_scenario(args.env, robot="sshape")
+    robot = sc.robot
+    expert = SlotThreading.load(robot)
+    planner = PolicyPlanner(policy, robot=robot, attempts=1, escape=args.escape)
+    rows = []
+    for p in tqdm(sc.problems("val", args.episodes, seed=args.seed), desc="rollouts", unit="problem"):
+        r = planner.plan(p)
+        slot = p.scene.__dict__["slot"]
+        t1 = expert.place(slot)[1]
+        path = np.asarray(r.path)
+        d = np.linalg.norm(path[:, :3] - t1[:3], axis=1)
+        turn = np.array([np.degrees(np.linalg.norm(robot.log(q, t1)[3:])) for q in path])
+        at_t1 = bool(np.any((d <= args.pos) & (turn <= args.rot)))
+        past = bool(np.any(path[:, 0] > 0))
+        stage = "solved" if r.success else ("exit" if past else ("insertion" if at_t1 else "approach"))
+        j = int(d.argmin())
+        rows.append(
+            {
+                "width_bars": slot["width"] / BAR_THICKNESS,
+                "long_axis": int(slot["long_axis"]),
+                "stage": stage,
+                "nearest_m": float(d[j]),
+                "nearest_turn_deg": float(turn[j]),
+            }
+        )
+    counts = {s: sum(r["stage"] == s for r in rows) for s in ("approach", "insertion", "exit", "solved")}
+    failed = [r for r in rows if r["stage"] == "approach"]
+    summary = {
+        "checkpoint": args.checkpoint,
+        "env": args.env,
+        "episodes": len(rows),
+        "escape": args.escape,
+        "stages": counts,
+        "approach_failures_nearest_m_median": float(np.median([r["nearest_m"] for r in failed])) if failed else None,
+        "approach_failures_nearest_turn_deg_median": float(np.median([r["nearest_turn_deg"] for r in failed])) if failed else None,
+        "approach_failures_turned_60_120_deg": sum(60 <= r["nearest_turn_deg"] <= 120 for r in failed),
+    }
+    print(json.dumps(summary, indent=1))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({**summary, "rows": rows}, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
