@@ -15,6 +15,10 @@ it was and by how much it was turned, and how many of those turns were 60-120 de
 (the slot's long axis taken for the other one).
 
     python scripts/slot_rollout_stages.py runs/bc_slot_local/bc.pt --episodes 50
+    python scripts/slot_rollout_stages.py runs/bc_slot_local/bc.pt --episodes 50 --from-approach
+
+With ``--from-approach`` each rollout starts where the expert's approach ends, which
+measures the threading alone.
 """
 
 from __future__ import annotations
@@ -35,6 +39,11 @@ def main() -> None:
     ap.add_argument("--escape", type=int, default=0, help="the planner's escape steps (default: 0, the mean action alone)")
     ap.add_argument("--pos", type=float, default=0.05, help="metres from the insertion pose that count as reaching it")
     ap.add_argument("--rot", type=float, default=20.0, help="degrees from the insertion pose that count as reaching it")
+    ap.add_argument(
+        "--from-approach",
+        action="store_true",
+        help="start each rollout at the template's first pose placed on the slot (0.3 before the wall, turned for the threading) instead of the problem's start; slots narrower than the template are left out",
+    )
     ap.add_argument("--json", help="write the counts and the per-problem rows here")
     args = ap.parse_args()
     torch.set_num_threads(1)
@@ -45,6 +54,7 @@ def main() -> None:
     from pointplan.planners.slot_threading import SlotThreading
     from pointplan.robots.sshape import BAR_THICKNESS
     from pointplan.scenes.scenarios import make_scenario
+    from pointplan.scenes.scene import Problem
 
     policy = Policy.from_checkpoint(args.checkpoint)
     sc = make_scenario(args.env, robot="sshape")
@@ -53,8 +63,12 @@ def main() -> None:
     planner = PolicyPlanner(policy, robot=robot, attempts=1, escape=args.escape)
     rows = []
     for p in tqdm(sc.problems("val", args.episodes, seed=args.seed), desc="rollouts", unit="problem"):
-        r = planner.plan(p)
         slot = p.scene.__dict__["slot"]
+        if args.from_approach:
+            if not expert.threads(slot):
+                continue
+            p = Problem(p.scene, expert.place(slot)[0], p.goal, p.tag)
+        r = planner.plan(p)
         t1 = expert.place(slot)[1]
         path = np.asarray(r.path)
         d = np.linalg.norm(path[:, :3] - t1[:3], axis=1)
@@ -79,6 +93,7 @@ def main() -> None:
         "env": args.env,
         "episodes": len(rows),
         "escape": args.escape,
+        "from_approach": args.from_approach,
         "stages": counts,
         "approach_failures_nearest_m_median": float(np.median([r["nearest_m"] for r in failed])) if failed else None,
         "approach_failures_nearest_turn_deg_median": float(np.median([r["nearest_turn_deg"] for r in failed])) if failed else None,
