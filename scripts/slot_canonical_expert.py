@@ -68,7 +68,8 @@ def make_template(args: argparse.Namespace) -> None:
                 continue
             raw = np.array(poses)
             ends = Problem(problem.scene, raw[0], raw[-1])
-            path = simplify(robot, ends, raw, args.seed)
+            # simplified for the body grown by --margin, so that the shortcuts keep that room
+            path = simplify(robot.padded(args.margin) if args.margin > 0 else robot, ends, raw, args.seed)
             first, last = path[0].copy(), path[-1].copy()
             first[0] -= BACK
             last[0] += BACK
@@ -147,6 +148,7 @@ def main() -> None:
     t.add_argument("--ds", type=float, default=0.004)
     t.add_argument("--min-clearance", type=float, default=0.0015)
     t.add_argument("--guide", type=float, default=0.05)
+    t.add_argument("--margin", type=float, default=0.0, help="simplify for the body grown by this much (keeps that clearance; ask --min-clearance above it)")
     t.add_argument("--verbose", action="store_true")
     d = sub.add_parser("demos", help="demonstrations of training problems from a template")
     d.add_argument("--template", help="a template file (default: the one shipped, pointplan/data/slot_threading.npz)")

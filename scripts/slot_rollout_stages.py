@@ -44,6 +44,7 @@ def main() -> None:
         action="store_true",
         help="start each rollout at the template's first pose placed on the slot (0.3 before the wall, turned for the threading) instead of the problem's start; slots narrower than the template are left out",
     )
+    ap.add_argument("--template", help="the threading template (default: the shipped one)")
     ap.add_argument("--json", help="write the counts and the per-problem rows here")
     args = ap.parse_args()
     torch.set_num_threads(1)
@@ -59,7 +60,7 @@ def main() -> None:
     policy = Policy.from_checkpoint(args.checkpoint)
     sc = make_scenario(args.env, robot="sshape")
     robot = sc.robot
-    expert = SlotThreading.load(robot)
+    expert = SlotThreading.load(robot, args.template)
     planner = PolicyPlanner(policy, robot=robot, attempts=1, escape=args.escape)
     rows = []
     for p in tqdm(sc.problems("val", args.episodes, seed=args.seed), desc="rollouts", unit="problem"):
@@ -94,6 +95,7 @@ def main() -> None:
         "episodes": len(rows),
         "escape": args.escape,
         "from_approach": args.from_approach,
+        "template": args.template,
         "stages": counts,
         "approach_failures_nearest_m_median": float(np.median([r["nearest_m"] for r in failed])) if failed else None,
         "approach_failures_nearest_turn_deg_median": float(np.median([r["nearest_turn_deg"] for r in failed])) if failed else None,
