@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -113,3 +114,103 @@ def test_ppo_command_runs_saves_and_resumes(tmp_path: Path) -> None:
     assert main(["ppo", "--resume", str(run_dir / "last.pt"), "--steps", "100", *common]) == 2
     assert main(["ppo", "--steps", "100", *common]) == 2
     assert main(["ppo", "--resume", str(run_dir / "best.pt"), "--steps", "400", *common]) == 2
+
+
+@pytest.fixture(scope="module")
+def demos_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from pointplan.learning.bc import generate_demos, save_demos
+    from pointplan.scenes.scenarios import make_scenario
+
+    scenario = make_scenario("narrow2d")
+    demos = generate_demos(scenario, 6, seed=0, progress=False)
+    path = tmp_path_factory.mktemp("demos") / "demos.npz"
+    save_demos(path, scenario, demos, "train", 0)
+    return path
+
+
+def test_reverse_curriculum_starts_on_the_demonstrations_near_their_goal(demos_file: Path, tmp_path: Path) -> None:
+    cfg = PPOConfig(
+        init_actor=str(shipped_checkpoint("disc2d")), num_envs=8, rollout_steps=4, eval_episodes=2, start_demos=str(demos_file), start_share=1.0, start_back=2,
+        start_back_step=3, start_advance=0.5, start_min_episodes=4,
+    )  # fmt: skip
+    run = PPORun(cfg, tmp_path, None)
+    assert run.from_demo.all()
+    for i in range(cfg.num_envs):  # every start is one of the last two steps before a path's end, with that path's goal
+        hits = [
+            len(path) - 1 - int(np.flatnonzero(np.all(np.isclose(path, run.core.q[i]), axis=1))[0])
+            for prob, path in run.demo_paths
+            if np.allclose(prob.goal, run.core.goal[i]) and np.all(np.isclose(path, run.core.q[i]), axis=1).any()
+        ]
+        assert hits and 1 <= hits[0] <= 2
+    longest = max(len(p) for _, p in run.demo_paths) - 1
+    run.frontier = [1.0, 1.0, 1.0]  # too few frontier episodes
+    run.advance()
+    assert run.back == 2
+    run.frontier = [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]  # too few of the last 4 succeeded
+    run.advance()
+    assert run.back == 2 and run.frontier == [0.0, 1.0, 0.0, 0.0]  # a sliding window
+    run.frontier += [1.0, 1.0]  # the last 4: 0, 0, 1, 1
+    run.advance()
+    assert run.back == 5 and run.frontier == []
+    for _ in range(longest):
+        run.frontier = [1.0] * 4
+        run.advance()
+    assert run.back == longest  # at most the longest path: its starts are then the problems' own
+    # half of the starts drawn at the frontier (here its last step, 2 before the goal), half anywhere in the range
+    run3 = PPORun(replace(cfg, start_band=1), tmp_path / "c", None)
+    assert min(len(p) for _, p in run3.demo_paths) >= 3
+    fronts = []
+    for _ in range(200):
+        run3.reset([0])
+        fronts.append(run3.at_frontier[0])
+    assert 0.65 < np.mean(fronts) < 0.85  # 1/2 + 1/2 x 1/2
+    # with no share, every episode is a fresh problem
+    run2 = PPORun(PPOConfig(init_actor=cfg.init_actor, num_envs=4, eval_episodes=2, start_demos=str(demos_file), start_share=0.0), tmp_path / "b", None)
+    assert not run2.from_demo.any()
+
+
+def test_ppo_command_keeps_the_curriculum_across_a_resume(demos_file: Path, tmp_path: Path) -> None:
+    from pointplan.cli import main
+
+    run_dir = tmp_path / "run"
+    common = ["--num-envs", "4", "--rollout-steps", "10", "--eval-every", "40", "--eval-episodes", "2", "--value-warmup", "1", "--quiet"]
+    curriculum = [
+        "--start-demos",
+        str(demos_file),
+        *"--start-back 3 --start-back-step 2 --start-advance 0.01 --start-min-episodes 1 --start-frontier-share 1".split(),
+    ]
+    assert main(["ppo", "--init-actor", str(shipped_checkpoint("disc2d")), "--steps", "40", "--run-dir", str(run_dir), *curriculum, *common]) == 0
+    saved = load_checkpoint(run_dir / "last.pt")
+    back = saved["ppo"]["back"]
+    assert back > 3  # advanced (a frontier episode that succeeded passes the 1% bar)
+    from pointplan.config import from_dict
+
+    assert PPORun(from_dict(PPOConfig, saved["ppo_config"]), run_dir, run_dir / "last.pt").back == back  # restored, not restarted
+    header = (run_dir / "metrics.csv").read_text().splitlines()[0].split(",")
+    assert "start_back" in header and "demo_start_success" in header
+    assert main(["ppo", "--resume", str(run_dir / "last.pt"), "--steps", "80", *common]) == 0
+    assert load_checkpoint(run_dir / "last.pt")["ppo"]["back"] >= back
+    # demonstrations of another scenario are refused
+    other = tmp_path / "other.npz"
+    with np.load(demos_file) as f:
+        np.savez(other, **{k: (np.array("boxes3d") if k == "env" else f[k]) for k in f.files})
+    refused = ["ppo", "--init-actor", str(shipped_checkpoint("disc2d")), "--steps", "40", "--run-dir", str(tmp_path / "r2"), "--start-demos", str(other)]
+    assert main([*refused, *common]) == 2
+
+
+def test_the_greedy_goal_test_ends_episodes_whose_straight_edge_to_the_goal_is_free(tmp_path: Path) -> None:
+    from pointplan.planners.edges import edge_free
+
+    cfg = PPOConfig(init_actor=str(shipped_checkpoint("disc2d")), num_envs=8, rollout_steps=4, eval_episodes=2, greedy_goal=True)
+    run = PPORun(cfg, tmp_path, None)
+    run.core.q[0] = run.core.goal[0]  # at the goal: free for sure
+    reward, term, trunc = np.full(8, -0.1), np.zeros(8, bool), np.ones(8, bool)
+    term[7] = True  # an episode that already ended is left alone
+    r2, t2, tr2 = run.greedy(reward, term, trunc)
+    free = [edge_free(run.robot, s.world, q, g, 0.01, s.low, s.high)[0] for s, q, g in zip(run.core.scenes, run.core.q, run.core.goal)]
+    assert free[0] and not all(free[:7])  # some of the random starts are blocked
+    for i in range(7):
+        assert t2[i] == free[i] and tr2[i] == (not free[i])
+        assert r2[i] == pytest.approx(-0.1 + (20.0 if free[i] else 0.0))
+    assert t2[7] and r2[7] == -0.1
+    assert term.tolist() == [False] * 7 + [True] and trunc.all()  # the inputs are not changed

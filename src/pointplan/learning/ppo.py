@@ -37,6 +37,7 @@ from ..models.checkpoint import CheckpointError, load_checkpoint, save_checkpoin
 from ..models.encoders import make_encoder, mlp
 from ..models.inputs import goal_input, obs_input
 from ..scenes.scenarios import make_scenario
+from ..scenes.scene import Problem
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,29 @@ class PPOConfig:
     eval_escape: bool = True
     #: what ``best.pt`` is chosen by: ``mean`` (the plain mean-action rollout) or ``escape``
     select: str = "mean"
+    #: end an episode as solved once the straight edge to the goal is certified free, as the
+    #: planner does (``PolicyPlanner(greedy_goal=True)``; static scenes); validation too
+    greedy_goal: bool = False
+    #: a demonstrations file (``pointplan bc --save-demos``, or ``slot_canonical_expert.py
+    #: demos``) of this scenario: a share of the episodes start on its paths, a few steps
+    #: before their goal, and further back as they succeed (a reverse curriculum)
+    start_demos: str = ""
+    #: the share of episodes started on a demonstration (the rest: fresh problems)
+    start_share: float = field(default=0.8, metadata={"min": 0})
+    #: a demonstration start is this many steps before its goal at most, at first (a path
+    #: shorter than that starts at its own start)
+    start_back: int = field(default=8, metadata={"min": 1})
+    #: the frontier: the last this many steps of that range
+    start_band: int = field(default=8, metadata={"min": 1})
+    #: the share of demonstration starts drawn at the frontier (the rest: anywhere in the range)
+    start_frontier_share: float = 0.5
+    #: the range grows by this many steps once the frontier's episodes succeed often enough
+    start_back_step: int = field(default=4, metadata={"min": 1})
+    #: ... that is, once this share of the last ``start_min_episodes`` frontier episodes
+    #: since the range last grew succeeded
+    start_advance: float = 0.6
+    #: frontier episodes judged each time (a sliding window, emptied when the range grows)
+    start_min_episodes: int = field(default=32, metadata={"min": 1})
     seed: int = 0
     device: str = "cpu"
 
@@ -101,6 +125,8 @@ class PPOConfig:
             raise ValueError("gamma must be in (0, 1] and lam in [0, 1]")
         if self.clip <= 0:
             raise ValueError(f"clip must be > 0, not {self.clip}")
+        if not 0 <= self.start_share <= 1 or not 0 <= self.start_frontier_share <= 1 or not 0 < self.start_advance <= 1:
+            raise ValueError("start_share and start_frontier_share must be in [0, 1], start_advance in (0, 1]")
 
 
 class ValueNetwork(nn.Module):
@@ -202,11 +228,78 @@ class PPORun:
         for g in self.opt_value.param_groups:
             g["lr"] = cfg.value_lr
         self.val_problems = self.scenario.problems("val", cfg.eval_episodes, seed=cfg.seed)
-        self.core.reset_envs(range(cfg.num_envs), self.rng)
+        if cfg.greedy_goal and any(p.scene.dynamic for p in self.val_problems):
+            raise ValueError("greedy_goal connects to the goal in static scenes only")
+        # the reverse curriculum: starts on demonstration paths, ``back`` steps from the goal at most
+        self.demo_paths: list[tuple[Problem, np.ndarray]] = []
+        self.back = cfg.start_back
+        self.from_demo = np.zeros(cfg.num_envs, bool)
+        self.at_frontier = np.zeros(cfg.num_envs, bool)
+        self.recent_demo: list[float] = []
+        self.frontier: list[float] = []  # outcomes of the frontier episodes since the range last grew
+        if cfg.start_demos:
+            from .bc import load_demos
+
+            demos = load_demos(cfg.start_demos, self.scenario)
+            by_index: dict[int, Problem] = {}
+            for k, _ in demos.paths:  # the problems are listed in the order their indices first appear
+                by_index.setdefault(k, demos.problems[len(by_index)])
+            self.demo_paths = [(by_index[k], path) for k, path in demos.paths if len(path) >= 2]
+            if not self.demo_paths:
+                raise ValueError(f"{cfg.start_demos}: no demonstration path to start on")
+        if resume is not None and "back" in init["ppo"]:
+            self.back = int(init["ppo"]["back"])
+            self.frontier = [float(x) for x in init["ppo"].get("frontier", [])]
+        self.reset(range(cfg.num_envs))
         self.obs = self.core.observe(self.rng)["observation"]
         self.t_start = time.perf_counter()
         self.next_eval = (self.steps // cfg.eval_every + 1) * cfg.eval_every
         self.history: list[dict[str, float]] = []
+
+    def reset(self, idx: Any) -> None:
+        """New episodes in environments ``idx``: on a demonstration path (a share
+        ``start_share`` of them, when there are demonstrations) or a fresh problem."""
+        cfg = self.cfg
+        idx = list(idx)
+        problems: list[Problem | None] = []
+        for i in idx:
+            use = bool(self.demo_paths) and self.rng.random() < cfg.start_share
+            self.from_demo[i] = use
+            self.at_frontier[i] = False
+            if not use:
+                problems.append(None)
+                continue
+            prob, path = self.demo_paths[int(self.rng.integers(len(self.demo_paths)))]
+            low = max(1, self.back - cfg.start_band + 1) if self.rng.random() < cfg.start_frontier_share else 1
+            k = min(int(self.rng.integers(low, self.back + 1)), len(path) - 1)
+            self.at_frontier[i] = k > self.back - cfg.start_band
+            problems.append(Problem(prob.scene, path[len(path) - 1 - k].copy(), prob.goal, prob.tag))
+        self.core.reset_envs(idx, self.rng, problems)
+
+    def greedy(self, reward: np.ndarray, term: np.ndarray, trunc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The planner's goal test after a step: where the episode goes on and the straight
+        edge to the goal is free, it ends solved, with the arrival reward."""
+        from ..planners.edges import edge_free
+
+        core = self.core
+        reward, term, trunc = reward.copy(), term.copy(), trunc.copy()
+        for i in np.flatnonzero(~term):
+            sc = core.scenes[i]
+            assert sc is not None
+            if edge_free(self.robot, sc.world, core.q[i], core.goal[i], 0.01, sc.low, sc.high)[0]:
+                term[i], trunc[i] = True, False
+                reward[i] += self.env_cfg.reward_success
+        return reward, term, trunc
+
+    def advance(self) -> None:
+        """Move the demonstration starts further back once enough of those at the frontier
+        succeed (judged on the last ``start_min_episodes`` of them since the last move)."""
+        cfg = self.cfg
+        longest = max((len(p) - 1 for _, p in self.demo_paths), default=0)
+        self.frontier = self.frontier[-cfg.start_min_episodes :]
+        if len(self.frontier) == cfg.start_min_episodes and np.mean(self.frontier) >= cfg.start_advance and self.back < longest:
+            self.back = min(self.back + cfg.start_back_step, longest)
+            self.frontier = []
 
     @property
     def wall(self) -> float:
@@ -240,6 +333,8 @@ class PPORun:
                 logp_b[t] = gaussian_logp(u, mean, log_std).cpu().numpy()
                 val_b[t] = self.value(ot, gt).cpu().numpy()
                 reward, term, trunc, _ = core.step(torch.tanh(u).cpu().numpy())
+                if cfg.greedy_goal:
+                    reward, term, trunc = self.greedy(reward, term, trunc)
                 rew_b[t] = reward * cfg.reward_scale
                 done = term | trunc
                 done_b[t] = done
@@ -249,8 +344,11 @@ class PPORun:
                     truncated_at.append((t, idx, obs_input(robot, nxt[idx]), goal_input(robot, core.q[idx], core.goal[idx])))
                 if done.any():
                     ended = np.flatnonzero(done)
-                    self.recent = (self.recent + [float(term[i]) for i in ended])[-400:]
-                    core.reset_envs(ended.tolist(), self.rng)
+                    demo = [i for i in ended if self.from_demo[i]]
+                    self.frontier += [float(term[i]) for i in ended if self.at_frontier[i]]
+                    self.recent_demo = (self.recent_demo + [float(term[i]) for i in demo])[-400:]
+                    self.recent = (self.recent + [float(term[i]) for i in ended if not self.from_demo[i]])[-400:]
+                    self.reset(ended.tolist())
                     fresh = core.observe(self.rng)["observation"]
                     nxt = np.where(done.reshape((-1,) + (1,) * len(self.obs_shape)), fresh, nxt)
                 self.obs = nxt
@@ -262,6 +360,8 @@ class PPORun:
                 next_b[t, idx] = self.value(self.tensor(o), self.tensor(g)).cpu().numpy()
         adv, ret = gae(rew_b, val_b, next_b, done_b, cfg.gamma, cfg.lam)
         self.steps += T * E
+        if self.demo_paths:
+            self.advance()
         flat = lambda x: x.reshape((T * E,) + x.shape[2:])  # noqa: E731
         return _Batch(flat(obs_b), flat(goal_b), flat(u_b), flat(logp_b), flat(adv), flat(ret))
 
@@ -328,14 +428,23 @@ class PPORun:
 
         actor.eval()
         row: dict[str, float] = {}
-        res = rollout_batch(act, robot, env, self.val_problems, self.scenario.horizon, seed=self.cfg.seed)
+        greedy = self.cfg.greedy_goal
+        res = rollout_batch(act, robot, env, self.val_problems, self.scenario.horizon, seed=self.cfg.seed, greedy_goal=greedy)
         row["val_success"] = float(np.mean([r.success for r in res]))
         solved = [r.nodes for r in res if r.success]
         row["val_steps"] = float(np.mean(solved)) if solved else 0.0
         escape = ESCAPE_DEFAULTS.get(robot.name)
         if self.cfg.eval_escape and escape is not None:
             res = rollout_batch(
-                act, robot, env, self.val_problems, self.scenario.horizon, seed=self.cfg.seed, escape=escape, noise_rng=np.random.default_rng(self.cfg.seed)
+                act,
+                robot,
+                env,
+                self.val_problems,
+                self.scenario.horizon,
+                seed=self.cfg.seed,
+                escape=escape,
+                noise_rng=np.random.default_rng(self.cfg.seed),
+                greedy_goal=greedy,
             )
             row["val_success_escape"] = float(np.mean([r.success for r in res]))
         actor.train()
@@ -354,6 +463,8 @@ class PPORun:
             "steps": self.steps,
             "iterations": self.iterations,
             "best": self.best,
+            "back": self.back,
+            "frontier": list(self.frontier),
             "wall_time_s": self.wall,
             "rng": self.rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
@@ -399,12 +510,19 @@ def train_ppo(cfg: PPOConfig, run_dir: str | Path, resume: str | Path | None = N
             losses = run.update(batch)
             if bar is not None:
                 bar.update(run.steps - before)
-                bar.set_postfix(train_success=f"{np.mean(run.recent) if run.recent else 0:.2f}", best=f"{max(run.best, 0):.3f}")
+                post = {"train_success": f"{np.mean(run.recent) if run.recent else 0:.2f}", "best": f"{max(run.best, 0):.3f}"}
+                if run.demo_paths:
+                    post.update(back=str(run.back), demo_success=f"{np.mean(run.recent_demo) if run.recent_demo else 0:.2f}")
+                bar.set_postfix(**post)
             if run.steps >= run.next_eval or run.steps >= cfg.total_steps:
                 run.next_eval += cfg.eval_every
                 row = {"env_steps": float(run.steps), "iterations": float(run.iterations), "wall_time_s": run.wall}
                 row.update(run.validate())
                 row["train_success"] = float(np.mean(run.recent)) if run.recent else 0.0
+                if run.demo_paths:
+                    row["start_back"] = float(run.back)
+                    row["demo_start_success"] = float(np.mean(run.recent_demo)) if run.recent_demo else 0.0
+                    row["frontier_success"] = float(np.mean(run.frontier)) if run.frontier else float("nan")
                 row.update(losses)
                 logger.log(row)
                 run.history.append(row)
