@@ -99,7 +99,7 @@ def demos(args: argparse.Namespace) -> None:
 
     sc = make_scenario(args.env, robot="sshape")
     robot = sc.robot
-    expert = SlotThreading.load(robot, args.template, args.max_nodes)
+    expert = SlotThreading.load(robot, args.template, args.max_nodes, copies=args.copies)
     out = Path(args.save_demos)
     paths: list[tuple[int, np.ndarray]] = list(load_demos(out, sc).paths) if out.exists() else []
     done = {k for k, _ in paths}
@@ -160,6 +160,7 @@ def main() -> None:
     d.add_argument("--demo-n", type=int, default=3000, help="the n of the demonstration indices (the same for every process filling one file)")
     d.add_argument("--max-nodes", type=int, default=5000, help="Bi-RRT nodes where a straight edge collides")
     d.add_argument("--save-every", type=int, default=100)
+    d.add_argument("--copies", action="store_true", help="follow the template's symmetric copy turned least from the start (SlotThreading(copies=True))")
     d.add_argument("--verbose", action="store_true")
     args = ap.parse_args()
     if args.cmd == "template":

@@ -45,6 +45,11 @@ def main() -> None:
         help="start each rollout at the template's first pose placed on the slot (0.3 before the wall, turned for the threading) instead of the problem's start; slots narrower than the template are left out",
     )
     ap.add_argument("--template", help="the threading template (default: the shipped one)")
+    ap.add_argument(
+        "--copies",
+        action="store_true",
+        help="with the template's symmetric copies: --from-approach starts at the approach of the copy turned least from the problem's start, and reaching any copy's insertion pose counts",
+    )
     ap.add_argument("--json", help="write the counts and the per-problem rows here")
     args = ap.parse_args()
     torch.set_num_threads(1)
@@ -60,7 +65,8 @@ def main() -> None:
     policy = Policy.from_checkpoint(args.checkpoint)
     sc = make_scenario(args.env, robot="sshape")
     robot = sc.robot
-    expert = SlotThreading.load(robot, args.template)
+    expert = SlotThreading.load(robot, args.template, copies=args.copies)
+    n_copies = 4 if args.copies else 1
     planner = PolicyPlanner(policy, robot=robot, attempts=1, escape=args.escape)
     rows = []
     for p in tqdm(sc.problems("val", args.episodes, seed=args.seed), desc="rollouts", unit="problem"):
@@ -68,13 +74,19 @@ def main() -> None:
         if args.from_approach:
             if not expert.threads(slot):
                 continue
-            p = Problem(p.scene, expert.place(slot)[0], p.goal, p.tag)
+            p = Problem(p.scene, expert.choose(slot, p.start)[0], p.goal, p.tag)
         r = planner.plan(p)
-        t1 = expert.place(slot)[1]
         path = np.asarray(r.path)
-        d = np.linalg.norm(path[:, :3] - t1[:3], axis=1)
-        turn = np.array([np.degrees(np.linalg.norm(robot.log(q, t1)[3:])) for q in path])
-        at_t1 = bool(np.any((d <= args.pos) & (turn <= args.rot)))
+        # the insertion pose of each copy (one without --copies); the nearest visit to any
+        d, turn = np.full(len(path), np.inf), np.full(len(path), np.inf)
+        at_t1 = False
+        for k in range(n_copies):
+            t1 = expert.place(slot, k)[1]
+            dk = np.linalg.norm(path[:, :3] - t1[:3], axis=1)
+            tk = np.array([np.degrees(np.linalg.norm(robot.log(q, t1)[3:])) for q in path])
+            at_t1 = at_t1 or bool(np.any((dk <= args.pos) & (tk <= args.rot)))
+            better = dk < d
+            d, turn = np.where(better, dk, d), np.where(better, tk, turn)
         past = bool(np.any(path[:, 0] > 0))
         stage = "solved" if r.success else ("exit" if past else ("insertion" if at_t1 else "approach"))
         j = int(d.argmin())
@@ -96,6 +108,7 @@ def main() -> None:
         "escape": args.escape,
         "from_approach": args.from_approach,
         "template": args.template,
+        "copies": args.copies,
         "stages": counts,
         "approach_failures_nearest_m_median": float(np.median([r["nearest_m"] for r in failed])) if failed else None,
         "approach_failures_nearest_turn_deg_median": float(np.median([r["nearest_turn_deg"] for r in failed])) if failed else None,

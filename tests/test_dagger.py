@@ -72,16 +72,17 @@ def test_dagger_rounds_add_expert_labels_and_resume(tmp_path: Path) -> None:
     assert Policy.from_checkpoint(tmp_path / "best.pt").observation == "surface-normals"
 
 
-def test_dagger_with_the_slot_threading_expert_plans_its_own_demos_and_labels(tmp_path: Path) -> None:
-    """``expert="slot-threading"``: the first demonstrations and the labels of failed rollouts
-    come from the slot threading expert; each label starts where the policy was and is a
-    certified path to the goal."""
+@pytest.mark.parametrize("expert", ["slot-threading", "slot-threading-copies"])
+def test_dagger_with_the_slot_threading_expert_plans_its_own_demos_and_labels(tmp_path: Path, expert: str) -> None:
+    """``expert="slot-threading"`` (and with the template's symmetric copies): the first
+    demonstrations and the labels of failed rollouts come from the slot threading expert;
+    each label starts where the policy was and is a certified path to the goal."""
     from pointplan.evaluation.evaluate import check_path
     from pointplan.scenes.scenarios import make_scenario
     from pointplan.scenes.scene import Problem
 
     bc = BCConfig(env="slot", robot="sshape", observation="global", n_points=32, n_problems=3, epochs=1, net=SMALL, refresh_every=0)
-    cfg = DaggerConfig(bc, rounds=1, rollouts=2, labels_per_failure=2, epochs_per_round=1, eval_episodes=2, expert="slot-threading")
+    cfg = DaggerConfig(bc, rounds=1, rollouts=2, labels_per_failure=2, epochs_per_round=1, eval_episodes=2, expert=expert)
     train_dagger(cfg, tmp_path, progress=False)
     sc = make_scenario("slot", robot="sshape")
     demos = load_demos(tmp_path / "demos.npz", sc)

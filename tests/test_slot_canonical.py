@@ -63,6 +63,43 @@ def test_template_threads_moved_turned_and_wider_slots_but_not_a_narrower_one() 
     assert _coal_min_clearance(sweep_mod, robot, problem, path) < 0.0
 
 
+def test_the_symmetric_copies_thread_the_slot_and_the_nearest_one_is_taken() -> None:
+    """Each of the template's four copies (half turns that leave the wall where it is) goes
+    through moved and turned slots from the start side to the goal side, certified and free
+    by coal; with ``copies`` the expert follows the copy turned least from the start."""
+    from scipy.spatial.transform import Rotation
+
+    from pointplan.planners.slot_threading import SYMMETRIES
+
+    sweep_mod = _module("slot_sweep_expert")
+    robot = make_scenario("slot", "sshape").robot
+    expert = SlotThreading.load(robot, copies=True)
+    rng = np.random.default_rng(5)
+    for long_axis in (1, 2):
+        width = rng.uniform(expert.width_bars, 4.0) * BAR_THICKNESS
+        scene = _wall(width, np.array([0.0, *rng.uniform(-0.15, 0.15, 2)]), long_axis)
+        slot = scene.__dict__["slot"]
+        firsts = []
+        for k in range(len(SYMMETRIES)):
+            path = expert.place(slot, k)
+            problem = Problem(scene, path[0], path[-1])
+            assert path[0, 0] < -0.2 and path[-1, 0] > 0.2
+            assert check_path(robot, problem, path)
+            assert _coal_min_clearance(sweep_mod, robot, problem, path) > 0.0
+            firsts.append(Rotation.from_quat(path[0, 3:]))
+        # four different approach orientations, not the same one four times
+        assert min((firsts[i].inv() * firsts[j]).magnitude() for i in range(4) for j in range(i)) > 0.5
+        for k in range(len(SYMMETRIES)):  # a start turned a little from copy k's approach follows copy k
+            t = expert.place(slot, k)
+            start = t[0].copy()
+            start[0] -= 0.1
+            start[3:] = (Rotation.from_rotvec([0.2, -0.1, 0.1]) * Rotation.from_quat(t[0, 3:])).as_quat()
+            assert np.allclose(expert.choose(slot, start), t)
+    # without ``copies`` the template itself is taken, however the robot is turned
+    plain = SlotThreading.load(robot)
+    assert np.allclose(plain.choose(slot, expert.place(slot, 2)[0]), plain.place(slot))
+
+
 def _wall(width: float, mid: np.ndarray, long_axis: int):  # type: ignore[no-untyped-def]
     from pointplan.scenes.scenes3d import SlotScenario
 

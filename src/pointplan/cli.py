@@ -638,7 +638,7 @@ def cmd_bc(args: argparse.Namespace) -> int:
     if args.dagger_rounds or args.resume:
         run_dir = args.run_dir or (str(Path(args.resume).parent) if args.resume else "runs/latest")
         summary = train_dagger(cfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume)
-    elif cfg.expert == "slot-threading":
+    elif cfg.expert.startswith("slot-threading"):
         from .learning.dagger import first_demos
         from .scenes.scenarios import make_scenario
 

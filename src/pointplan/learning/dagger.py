@@ -63,8 +63,10 @@ class DaggerConfig:
     max_nodes: int = field(default=20000, metadata={"min": 1})
     #: who labels: ``birrt`` (Bi-RRT from the state reached to the goal) or ``slot-threading``
     #: (Slot scenes only: one threading of every slot, :mod:`pointplan.planners.slot_threading`;
-    #: it also plans the first demonstrations when there is no demonstrations file)
-    expert: str = field(default="birrt", metadata={"choices": ("birrt", "slot-threading")})
+    #: it also plans the first demonstrations when there is no demonstrations file), or
+    #: ``slot-threading-copies`` (the same with the template's symmetric copies, the one
+    #: turned least from the robot: ``SlotThreading(copies=True)``)
+    expert: str = field(default="birrt", metadata={"choices": ("birrt", "slot-threading", "slot-threading-copies")})
 
 
 def _rollout_index(seed: int, rnd: int, rollouts: int, i: int) -> int:
@@ -118,14 +120,16 @@ def _resume(path: str | Path, device: str, actor: Actor, opt: torch.optim.Optimi
     return dict(d)
 
 
-def _threading_labels(scenario: Scenario, labels: Sequence[tuple[int, int, np.ndarray | None]], progress: bool, desc: str) -> list[tuple[int, np.ndarray]]:
+def _threading_labels(
+    scenario: Scenario, labels: Sequence[tuple[int, int, np.ndarray | None]], progress: bool, desc: str, copies: bool = False
+) -> list[tuple[int, np.ndarray]]:
     """The slot threading expert's paths, cut into policy steps, for ``(problem index in the
     training split, planner seed, start or None)``; the unsolved ones are left out. It takes
     milliseconds a query, so it runs here, not in workers."""
     from ..planners.slot_threading import SlotThreading
     from .bc import resample_path
 
-    expert = SlotThreading.load(scenario.robot)
+    expert = SlotThreading.load(scenario.robot, copies=copies)
     out = []
     it = labels
     if progress:
@@ -147,11 +151,12 @@ def first_demos(cfg: DaggerConfig, scenario: Scenario, demos_path: Path, progres
     source = b.demos_file if b.demos_file and Path(b.demos_file).exists() else None
     if source:
         demos = load_demos(source, scenario)
-    elif cfg.expert == "slot-threading":
+    elif cfg.expert.startswith("slot-threading"):
         from .bc import _demo_index
 
         jobs = [(_demo_index(b.seed, b.n_problems, i), b.seed, None) for i in range(b.n_problems)]
-        demos = demos_from_paths(scenario, "train", b.seed, _threading_labels(scenario, jobs, progress, "demonstrations"))
+        paths = _threading_labels(scenario, jobs, progress, "demonstrations", copies=cfg.expert == "slot-threading-copies")
+        demos = demos_from_paths(scenario, "train", b.seed, paths)
     else:
         demos = generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address)
     save_demos(demos_path, scenario, demos, "train", b.seed)
@@ -177,9 +182,9 @@ def _roll_out_and_label(
     probs = [scenario.problem("train", _rollout_index(b.seed, rnd, cfg.rollouts, i), seed=b.seed) for i in range(cfg.rollouts)]
     results = rollout_batch(policy, scenario.robot, env, probs, scenario.horizon, seed=b.seed * 1000 + rnd)
     jobs = _label_jobs(cfg, scenario, rnd, results)
-    if cfg.expert == "slot-threading":
+    if cfg.expert.startswith("slot-threading"):
         labels = [(j[3], j[4], j[7]) for j in jobs]
-        return results, _threading_labels(scenario, labels, progress, f"round {rnd + 1}: expert labels")
+        return results, _threading_labels(scenario, labels, progress, f"round {rnd + 1}: expert labels", copies=cfg.expert == "slot-threading-copies")
     return results, plan_demos(jobs, pool, progress, desc=f"round {rnd + 1}: expert labels")
 
 

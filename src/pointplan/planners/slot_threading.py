@@ -18,6 +18,14 @@ it reaches, or else to the template's first pose (0.3 before the wall; Bi-RRT wh
 straight edge collides), the template on from there, and a straight edge (or Bi-RRT) to
 the goal. The expert reads the slot's width, centre and long axis from the scene: it is for
 demonstrations, not a planner for unknown scenes.
+
+With ``copies=True`` the expert also uses the template's symmetric copies. The wall with its
+opening is unchanged by a half turn about the wall's normal through the opening's centre,
+and by a half turn about the opening's long or short axis, which swaps the wall's sides:
+so the template turned about the normal threads the slot, and so does the template run
+backwards and turned about either axis in the wall. Of the four, the expert takes the one
+whose approach pose is turned least from the robot (from the start side), or whose nearest
+pose is (once the robot is at the wall), so that the approach asks for less turning.
 """
 
 from __future__ import annotations
@@ -36,40 +44,83 @@ from .edges import edge_free
 
 #: the turn that takes a slot long along y to one long along z (90 degrees about x)
 TURN = Rotation.from_euler("x", 90, degrees=True)
+#: the half turns that leave the reference wall and its opening where they are, each with
+#: whether the template runs backwards under it (a turn about y or z swaps the wall's sides)
+SYMMETRIES = (
+    (Rotation.identity(), False),
+    (Rotation.from_euler("x", 180, degrees=True), False),
+    (Rotation.from_euler("y", 180, degrees=True), True),
+    (Rotation.from_euler("z", 180, degrees=True), True),
+)
+#: metres of distance that weigh as much as a radian of turn, when the nearest pose is sought
+METRES_PER_RADIAN = 0.1
+
+
+def _turn_angle(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
+    """Angles (radians) between unit quaternions ``(..., 4)``, either sign."""
+    d = np.abs(np.sum(np.asarray(qa) * np.asarray(qb), -1))
+    return 2.0 * np.arccos(np.clip(d, 0.0, 1.0))
+
+
+def symmetric_copy(template: np.ndarray, k: int) -> np.ndarray:
+    """Copy ``k`` (0-3, :data:`SYMMETRIES`) of a template in the reference slot."""
+    rot, backwards = SYMMETRIES[k]
+    out = np.asarray(template, np.float64).copy()
+    if backwards:
+        out = out[::-1].copy()
+    out[:, :3] = rot.apply(out[:, :3])
+    out[:, 3:] = (rot * Rotation.from_quat(out[:, 3:])).as_quat()
+    return out
 
 
 class SlotThreading:
     """The expert of one template (``(N, 7)`` poses in the reference slot, the first before
     the wall, the last past it)."""
 
-    def __init__(self, robot: Robot, template: np.ndarray, width_bars: float, max_nodes: int = 2000) -> None:
+    def __init__(self, robot: Robot, template: np.ndarray, width_bars: float, max_nodes: int = 2000, copies: bool = False) -> None:
         template = np.asarray(template, np.float64)
         if template.ndim != 2 or template.shape[1] != robot.config_dim or len(template) < 2:
             raise ValueError(f"a template is (N >= 2, {robot.config_dim}) poses, not {template.shape}")
         self.robot, self.template, self.width_bars, self.max_nodes = robot, template, float(width_bars), int(max_nodes)
+        self.copies = bool(copies)
 
     @classmethod
-    def load(cls, robot: Robot, path: str | Path | None = None, max_nodes: int = 2000) -> SlotThreading:
+    def load(cls, robot: Robot, path: str | Path | None = None, max_nodes: int = 2000, copies: bool = False) -> SlotThreading:
         """The template in ``path`` (``np.savez`` with ``poses`` and ``width_bars``), by
         default the one shipped in the package."""
         if path is None:
             with resources.as_file(resources.files("pointplan") / "data" / "slot_threading.npz") as f:
-                return cls.load(robot, f, max_nodes)
+                return cls.load(robot, f, max_nodes, copies)
         with np.load(Path(path)) as z:
-            return cls(robot, np.array(z["poses"]), float(z["width_bars"]), max_nodes)
+            return cls(robot, np.array(z["poses"]), float(z["width_bars"]), max_nodes, copies)
 
     def threads(self, slot: dict) -> bool:
         """Is the slot at least as wide as the template's?"""
         return float(slot["width"]) / BAR_THICKNESS >= self.width_bars - 1e-9
 
-    def place(self, slot: dict) -> np.ndarray:
-        """The template moved (and turned) onto ``slot`` (the scene's ``slot`` entry)."""
-        out = self.template.copy()
+    def place(self, slot: dict, copy: int = 0) -> np.ndarray:
+        """The template (or its symmetric copy ``copy``, 0-3) moved (and turned) onto
+        ``slot`` (the scene's ``slot`` entry)."""
+        out = symmetric_copy(self.template, copy) if copy else self.template.copy()
         if int(slot["long_axis"]) == 2:
             out[:, :3] = TURN.apply(out[:, :3])
             out[:, 3:] = (TURN * Rotation.from_quat(out[:, 3:])).as_quat()
         out[:, 1:3] += np.asarray(slot["center"], np.float64)[1:3]
         return out
+
+    def choose(self, slot: dict, q: np.ndarray) -> np.ndarray:
+        """The placed template to follow from ``q``: the template itself, or with ``copies``
+        the copy turned least from ``q`` at its approach pose (``q`` before the approach
+        pose along x) or at its nearest pose (distance plus turn, ``q`` at the wall)."""
+        if not self.copies:
+            return self.place(slot)
+        q = np.asarray(q, np.float64)
+        placed = [self.place(slot, k) for k in range(len(SYMMETRIES))]
+        if q[0] <= placed[0][0, 0]:
+            cost = [float(_turn_angle(q[3:], t[0, 3:])) for t in placed]
+        else:
+            cost = [float(np.min(np.linalg.norm(t[:, :3] - q[:3], axis=1) / METRES_PER_RADIAN + _turn_angle(q[3:], t[:, 3:]))) for t in placed]
+        return placed[int(np.argmin(cost))]
 
     def _connect(self, problem: Problem, a: np.ndarray, b: np.ndarray, seed: int) -> np.ndarray | None:
         if edge_free(self.robot, problem, a, b)[0]:
@@ -88,7 +139,7 @@ class SlotThreading:
         if not self.threads(slot):
             return None
         q = np.asarray(problem.start if start is None else start, np.float64)
-        t = self.place(slot)
+        t = self.choose(slot, q)
         goal = np.asarray(problem.goal, np.float64)
         # already past the wall: straight to the goal if that is free
         if edge_free(self.robot, problem, q, goal)[0]:
