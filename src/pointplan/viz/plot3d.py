@@ -497,9 +497,11 @@ def render_grid_3d(
     output: str | Path | None = None,
     cols: int = 3,
     titles: Sequence[str] | None = None,
+    azim: float = -60,
 ) -> Figure:
     """Several problems (with their paths; ``None`` entries allowed) in a grid of 3D
-    subplots with one shared legend. Saves a PNG to ``output`` if given."""
+    subplots with one shared legend, seen from azimuth ``azim`` (degrees). Saves a PNG to
+    ``output`` if given."""
     n = len(problems)
     if n == 0:
         raise ValueError("no problems to draw")
@@ -522,7 +524,7 @@ def render_grid_3d(
         p = _as_path(paths[i], robot) if paths is not None else None
         any_path |= p is not None
         title = titles[i] if titles is not None else (_title_of(pr) or f"problem {i}")
-        _draw_problem(ax, pr, robot, p, None, None, title, None, 25, -60, fontsize=8)
+        _draw_problem(ax, pr, robot, p, None, None, title, None, 25, azim, fontsize=8)
         ax.set_box_aspect(tuple(pr.scene.high - pr.scene.low), zoom=1.0)  # room for the tick labels
     fig.legend(handles=_legend_handles(False, any_path), loc="lower center", ncols=4, fontsize=8, frameon=False)
     _save(fig, output)
