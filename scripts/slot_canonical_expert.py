@@ -153,7 +153,7 @@ def main() -> None:
     d = sub.add_parser("demos", help="demonstrations of training problems from a template")
     d.add_argument("--template", help="a template file (default: the one shipped, pointplan/data/slot_threading.npz)")
     d.add_argument("--save-demos", required=True)
-    d.add_argument("--env", default="slot", choices=["slot", "slotwide", "slotfixed"])
+    d.add_argument("--env", default="slot", choices=["slot", "slotwide", "slotfixed", "slotclassic"])
     d.add_argument("--problems", type=int, default=3000)
     d.add_argument("--first", type=int, default=0)
     d.add_argument("--seed", type=int, default=0)

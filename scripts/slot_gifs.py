@@ -8,7 +8,8 @@ template's approach pose (0.3 before the wall, turned for the threading; the tit
 so), as ``scripts/slot_rollout_stages.py --from-approach`` does. Every drawn path is
 certified by the evaluator's ``check_path``.
 
-    python scripts/slot_gifs.py checkpoints/slot_local_ppo_curriculum_best.pt -o docs/img/slot_policy
+    python scripts/slot_gifs.py src/pointplan/data/slot_sshape_local_policy.pt -o docs/img/slot_policy
+    python scripts/slot_gifs.py checkpoints/slotclassic_local_ppo_best.pt --env slotclassic -o docs/img/slotclassic_policy
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ def main() -> None:
     ap.add_argument("--tries", type=int, default=40, help="validation problems of a band rolled out from their start before the approach pose is used")
     ap.add_argument("--escape", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--env", default="slot", choices=["slot", "slotfixed", "slotclassic"], help="the Slot scene (default: slot)")
     args = ap.parse_args()
     torch.set_num_threads(1)
 
@@ -42,7 +44,7 @@ def main() -> None:
     from pointplan.viz.plot3d import render_grid_3d, render_rollout_gif
 
     policy = Policy.from_checkpoint(args.checkpoint)
-    sc = make_scenario("slot", robot="sshape")
+    sc = make_scenario(args.env, robot="sshape")
     robot = sc.robot
     planner = PolicyPlanner(policy, robot=robot, attempts=1, escape=args.escape)
     expert = SlotThreading.load(robot)

@@ -177,3 +177,35 @@ def test_slotfixed_keeps_the_opening_centred_and_long_along_y_and_slot_is_unchan
     assert slot["long_axis"] == 1
     assert np.isclose(slot["width"], 0.21244264810153043)
     assert np.allclose(slot["center"], [0.0, 0.04448986, -0.14577895])
+
+
+def test_slotclassic_has_one_goal_past_the_wall_that_the_expert_reaches() -> None:
+    """``slotclassic``: the opening centred and long along y, one goal (the template's last
+    pose) for every problem, clear of the wall by coal; the start varies, on the other side;
+    the threading expert's paths end at that goal and pass check_path and coal."""
+    sweep_mod = _module("slot_sweep_expert")
+    sc = make_scenario("slotclassic", "sshape")
+    robot = sc.robot
+    expert = SlotThreading.load(robot)
+    problems = sc.problems("val", 6, seed=0)
+    goals = np.array([p.goal for p in problems])
+    assert np.allclose(goals, goals[0]) and goals[0, 0] > 0.3
+    assert len({tuple(np.round(p.start, 6)) for p in problems}) == len(problems)
+    solved = 0
+    for p in problems:
+        slot = p.scene.__dict__["slot"]
+        assert slot["long_axis"] == 1 and np.allclose(slot["center"], 0.0)
+        assert p.start[0] < -0.3
+        assert _coal_min_clearance(sweep_mod, robot, p, np.array([p.goal, p.goal])) > 0.0
+        path = expert.plan(p, seed=0)
+        if path is None:
+            assert not expert.threads(slot)
+            continue
+        assert np.allclose(path[-1], p.goal) and np.allclose(path[0], p.start)
+        assert check_path(robot, p, path)
+        assert _coal_min_clearance(sweep_mod, robot, p, path) > 0.0
+        solved += 1
+    assert solved >= 4
+    # the sphere's goal is the same position
+    sphere = make_scenario("slotclassic", "sphere3d").problem("val", 0, seed=0)
+    assert np.allclose(sphere.goal, goals[0, :3])

@@ -169,7 +169,7 @@ def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
     elif name.lower() in LSAMPLE_PLANNERS:
         kwargs = {"max_nodes": args.max_nodes, "seed": seed, "checkpoint": getattr(args, "checkpoint", None)}
     elif name in ("policy", "hybrid"):
-        kwargs = {"checkpoint": getattr(args, "checkpoint", None), "observation": getattr(args, "observation", None)}
+        kwargs = {"checkpoint": getattr(args, "checkpoint", None), "observation": getattr(args, "observation", None), "scene": getattr(args, "env", None)}
         if getattr(args, "no_greedy_goal", False):
             if name == "policy":
                 kwargs["greedy_goal"] = False
@@ -456,7 +456,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     problems = scenario.problems("test", episodes, seed=0)
     observation = args.observation if args.checkpoint is None else None
     try:
-        policy = make_planner("policy", robot, checkpoint=args.checkpoint or "shipped", observation=observation)
+        policy = make_planner("policy", robot, checkpoint=args.checkpoint or "shipped", observation=observation, scene=scenario.name)
     except ValueError as e:
         raise CLIError(str(e)) from None
     planners = {"policy": policy, "birrt": make_planner("birrt", robot, seed=0, max_nodes=args.max_nodes), "straight": make_planner("straight", robot)}

@@ -21,6 +21,7 @@ ENV_IDS = {
     "slot": "pointplan/Slot-v0",
     "slotwide": "pointplan/SlotWide-v0",
     "slotfixed": "pointplan/SlotFixed-v0",
+    "slotclassic": "pointplan/SlotClassic-v0",
     "qureshi3d": "pointplan/Qureshi3D-v0",
 }
 

@@ -177,6 +177,12 @@ SHIPPED: dict[tuple[str, str], str] = {
     ("sshape", "local"): "sshape_local_policy.pt",
     ("sshape", "global"): "sshape_global_policy.pt",
 }
+#: policies trained for one scene, taken there before the 3D-Boxes ones: (robot,
+#: observation, scenario) -> file in ``pointplan/data``. Slot's is the paper's Slot policy
+#: (trained on Slot; docs/results.md, "Slot").
+SHIPPED_FOR_SCENE: dict[tuple[str, str, str], str] = {
+    ("sshape", "local", "slot"): "slot_sshape_local_policy.pt",
+}
 #: the observation a robot's policy uses when none is asked for (the better of the two on
 #: the validation problems where both ship; docs/results.md)
 DEFAULT_OBSERVATION = {"disc2d": "surface-normals", "sphere3d": "global", "sshape": "local"}
@@ -189,11 +195,17 @@ def shipped_policies() -> list[tuple[str, str]]:
     return [k for k, name in SHIPPED.items() if (files("pointplan") / "data" / name).is_file()]
 
 
-def shipped_checkpoint(robot: str = "disc2d", observation: str | None = None) -> Path:
+def shipped_checkpoint(robot: str = "disc2d", observation: str | None = None, scene: str | None = None) -> Path:
     """The path of the policy shipped for ``robot`` and ``observation`` (see
-    docs/results.md for how each was trained and what it scores)."""
+    docs/results.md for how each was trained and what it scores). With ``scene`` (a
+    scenario's name), the policy trained for that scene if one ships
+    (:data:`SHIPPED_FOR_SCENE`), else the robot's."""
     from importlib.resources import files
 
+    if scene is not None:
+        for (r, o, sc), fname in SHIPPED_FOR_SCENE.items():
+            if r == robot and sc == scene and (observation is None or observation == o) and (files("pointplan") / "data" / fname).is_file():
+                return Path(str(files("pointplan") / "data" / fname))
     if observation is None:  # the robot's usual observation, else any that ships for it
         have = [o for r, o in shipped_policies() if r == robot]
         default = DEFAULT_OBSERVATION.get(robot, "")

@@ -17,15 +17,15 @@ from .straight import StraightLine
 PLANNERS: dict[str, Callable[..., Planner]] = {"birrt": BiRRT, "straight": StraightLine}
 
 
-def _policy_factory(robot: Robot, checkpoint: str | None = None, observation: str | None = None, **kw: Any) -> Planner:
+def _policy_factory(robot: Robot, checkpoint: str | None = None, observation: str | None = None, scene: str | None = None, **kw: Any) -> Planner:
     """The policy planner: ``checkpoint`` (a path), or the policy that ships for ``robot``
-    and ``observation``."""
+    and ``observation`` (the one trained for ``scene``, a scenario's name, if one ships)."""
     from .policy import PolicyPlanner
 
     if not checkpoint or checkpoint == "shipped":
         from ..models.policy import shipped_checkpoint
 
-        checkpoint = str(shipped_checkpoint(robot.name, observation))
+        checkpoint = str(shipped_checkpoint(robot.name, observation, scene))
     planner = PolicyPlanner(checkpoint, robot=robot, **kw)
     if observation is not None and planner.policy.observation != observation:
         raise ValueError(f"the policy {checkpoint} was trained on {planner.policy.observation!r} observations, not {observation!r}")
@@ -39,6 +39,7 @@ def _hybrid_factory(
     robot: Robot,
     checkpoint: str | None = None,
     observation: str | None = None,
+    scene: str | None = None,
     max_nodes: int = 10000,
     seed: int = 0,
     stall_steps: int | None = 10,
@@ -48,7 +49,7 @@ def _hybrid_factory(
     escape: Any = None,
     **kw: Any,
 ) -> Planner:
-    """The policy (``checkpoint`` or the shipped one), stopped when it stalls (moved less
+    """The policy (``checkpoint`` or the shipped one, for ``scene`` if one ships), stopped when it stalls (moved less
     than ``stall_distance`` over ``stall_steps`` steps) or at its horizon, then Bi-RRT
     (``max_nodes``, ``seed``, other keywords) from its configuration closest to the goal.
     ``attempts``, ``action_noise``, ``escape``: the policy's sampled retries and stall
@@ -59,6 +60,7 @@ def _hybrid_factory(
         robot,
         checkpoint=checkpoint,
         observation=observation,
+        scene=scene,
         stall_steps=stall_steps,
         stall_distance=stall_distance,
         attempts=attempts,

@@ -308,6 +308,31 @@ class SlotFixedScenario(SlotScenario):
         super().__init__(robot, config or SlotConfig(center_range=0.0, long_axes=(1,)))
 
 
+#: the goal of ``slotclassic``: the last pose of the shipped threading template
+#: (``pointplan/data/slot_threading.npz``) in the centred slot long along y, 0.45 past the
+#: wall (position, then the quaternion x, y, z, w)
+SLOT_CLASSIC_GOAL = np.array([0.474, 0.005, 0.076, 0.005, -0.702, 0.712, 0.005])
+
+
+class SlotClassicScenario(SlotFixedScenario):
+    """``slotfixed`` with one goal for every problem (:data:`SLOT_CLASSIC_GOAL`, past the
+    wall; its position for the sphere): only the start and the slot's width vary. A diagnostic, not the paper's Slot: the
+    goal's relative pose, which the policy is given, then tells it exactly where the opening
+    is and which way it runs, so what a policy fails at here is not seeing the opening. Its
+    workspaces are drawn from their own stream."""
+
+    name = "slotclassic"
+
+    def sample_problem(self, scene: Scene, rng: np.random.Generator) -> tuple[Array, Array]:
+        start, _ = super().sample_problem(scene, rng)
+        goal = SLOT_CLASSIC_GOAL.copy()
+        goal[3:] /= np.linalg.norm(goal[3:])
+        goal = goal[: self.robot.config_dim]  # the sphere: the position alone
+        if self.robot.collides(scene.world, goal[None])[0]:
+            raise RuntimeError("slotclassic's goal collides: the wall or the robot changed")
+        return start, goal
+
+
 #: 3D-Qureshi obstacle centres and sizes (full sides), after the "complex 3D" environments
 #: of Qureshi et al. (MPNet): ten axis-aligned blocks in a cube, here scaled to [-0.6, 0.6]^3.
 QURESHI_CENTERS = np.array(
@@ -376,5 +401,6 @@ SCENARIOS_3D: dict[str, Callable[..., Scenario]] = {
     "slot": SlotScenario,
     "slotwide": SlotWideScenario,
     "slotfixed": SlotFixedScenario,
+    "slotclassic": SlotClassicScenario,
     "qureshi3d": Qureshi3DScenario,
 }
