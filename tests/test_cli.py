@@ -430,3 +430,16 @@ def test_eval_attempts_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
         == 2
     )
     assert "static scenes" in capsys.readouterr().err
+
+
+def test_eval_says_which_shipped_policy_it_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Without --checkpoint, eval names the shipped policy: Slot's own in Slot, 3D-Boxes' in
+    the other 3D scenes; with --checkpoint or --quiet it says nothing of the kind."""
+    out = tmp_path / "m.json"
+    assert main(["eval", "--env", "slot", "--planner", "policy", "--episodes", "1", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "the shipped policy slot_sshape_local_policy.pt (trained in slot, local observations)" in text
+    assert main(["eval", "--env", "boxes3d", "--robot", "sshape", "--planner", "policy", "--episodes", "1", "--json", str(out)]) == 0
+    assert "the shipped policy sshape_local_policy.pt (trained in boxes3d" in capsys.readouterr().out
+    assert main(["eval", "--env", "boxes3d", "--robot", "sshape", "--planner", "policy", "--episodes", "1", "--quiet", "--json", str(out)]) == 0
+    assert "shipped policy" not in capsys.readouterr().out

@@ -160,6 +160,20 @@ def _policy_input(planner: Any) -> tuple[str, int] | None:
     return str(planner.env.observation), int(planner.env.n_points or 0) or 64
 
 
+def _say_shipped(name: str, planner: Any, args: argparse.Namespace) -> None:
+    """Where no --checkpoint was given, say which shipped policy ``planner`` runs and where
+    it was trained (Slot has one of its own; the other 3D scenes share 3D-Boxes')."""
+    from .planners.hybrid import HybridPlanner
+    from .planners.policy import PolicyPlanner
+
+    if getattr(args, "checkpoint", None) or getattr(args, "quiet", False):
+        return
+    if isinstance(planner, HybridPlanner):
+        planner = planner.policy
+    if isinstance(planner, PolicyPlanner) and planner.policy.path is not None:
+        print(f"{name}: the shipped policy {planner.policy.path.name} (trained in {planner.policy.env}, {planner.policy.observation} observations)")
+
+
 def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
     from .planners import make_planner
 
@@ -262,6 +276,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     interrupted = None
     for name in names:
         planner = _planner(name, scenario.robot, args, args.seed)
+        _say_shipped(name, planner, args)
         report = evaluate(planner, problems, scenario.robot, progress=not args.quiet, **_scale(args))
         results[name] = report.metrics()
         interrupted = report.interrupted
@@ -459,6 +474,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         policy = make_planner("policy", robot, checkpoint=args.checkpoint or "shipped", observation=observation, scene=scenario.name)
     except ValueError as e:
         raise CLIError(str(e)) from None
+    _say_shipped("policy", policy, args)
     planners = {"policy": policy, "birrt": make_planner("birrt", robot, seed=0, max_nodes=args.max_nodes), "straight": make_planner("straight", robot)}
     metrics, reports = {}, {}
     for name, planner in planners.items():

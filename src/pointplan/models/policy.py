@@ -27,6 +27,8 @@ class Policy:
         self.robot = robot
         self.meta = meta
         self.device = torch.device(device)
+        #: the file it was loaded from (:meth:`from_checkpoint`), else None
+        self.path: Path | None = None
 
     @property
     def observation(self) -> str:
@@ -49,7 +51,9 @@ class Policy:
         actor.load_state_dict(data["actor"])  # a shared encoder's weights come with the actor
         actor.detach_encoder = False
         meta = {k: v for k, v in data.items() if k not in ("actor", "trainer")}
-        return cls(actor.to(device), robot, meta, device)
+        policy = cls(actor.to(device), robot, meta, device)
+        policy.path = Path(path)
+        return policy
 
     def check_env(self, robot: Robot, observation: str, obs_shape: tuple[int, ...]) -> None:
         """Raise a clear error if the env differs from the one the policy was trained on."""
