@@ -663,3 +663,21 @@ def test_expert_margin_keeps_the_demonstrations_away_from_obstacles() -> None:
     assert kept >= 3
     dmin_plain = [min(Clearance(robot, scenario.problem("train", k, seed=0).scene.obstacles)(x) for x in densify(robot, q, 0.005)) for k, q in plain.items()]
     assert min(dmin_plain) < 0.04  # without the margin some path grazes closer than that
+
+
+def test_bc_uses_every_demonstration_of_an_existing_file_and_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--demos FILE`` that exists is used whole, whatever ``--problems`` says, and the run
+    says so when the two differ; the checkpoint records the steps it learnt from."""
+    from pointplan.learning.bc import load_demos, save_demos
+
+    scenario = Narrow2DScenario()
+    demos = generate_demos(scenario, 5, seed=0, progress=False)
+    path = tmp_path / "demos.npz"
+    save_demos(path, scenario, demos, "train", 0)
+    n, steps = len(load_demos(path, scenario).problems), len(load_demos(path, scenario))
+    assert n >= 3
+    out = train_bc(BCConfig(n_problems=2, epochs=1, net=SMALL, demos_file=str(path)), tmp_path / "run", progress=True)
+    assert out["demo_steps"] == steps and out["demo_problems"] == n
+    assert f"all its {n} demonstrations are used (--problems 2" in capsys.readouterr().out
+    train_bc(BCConfig(n_problems=n, epochs=1, net=SMALL, demos_file=str(path)), tmp_path / "run2", progress=True)
+    assert "demonstrations are used" not in capsys.readouterr().out

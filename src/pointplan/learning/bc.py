@@ -305,7 +305,8 @@ class BCConfig:
     robot: str | None = None
     observation: str = "surface-normals"
     n_points: int = 64
-    #: demonstration problems planned by Bi-RRT
+    #: demonstration problems planned by Bi-RRT (when --demos names a file that exists,
+    #: every demonstration in it is used instead)
     n_problems: int = field(default=2000, metadata={"min": 1})
     #: passes over the demonstrations
     epochs: int = field(default=30, metadata={"min": 1})
@@ -350,6 +351,8 @@ def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: D
     t0 = time.perf_counter()
     if demos is None and cfg.demos_file and Path(cfg.demos_file).exists():
         demos = load_demos(cfg.demos_file, scenario)
+        if progress and len(demos.problems) != cfg.n_problems:
+            print(f"{cfg.demos_file}: all its {len(demos.problems)} demonstrations are used (--problems {cfg.n_problems} counts only problems to plan)")
     if demos is None:
         demos = generate_demos(
             scenario,
