@@ -17,6 +17,15 @@ between ``--x-min`` and ``--x-max``, random orientation, free):
    wall's centre, the mean of the openings' centres), and the probe's error at
    predicting the wall's centre itself.
 
+3. **Which way the opening runs** (``--axis``): the same probe trained to point along the
+   opening's long side in the robot frame (either sign), scored by the angle to it; the
+   closed-wall control again says what can be guessed without the opening (in the wall's
+   plane at random: 45 degrees on average).
+
+``global-near`` (``--observations global-near``, this script only) is ``global`` drawn
+from a pool 4x denser and only within ``--near-radius`` of the robot's frame: the same
+256 points spent on the wall near the robot, where the opening's inner faces show.
+
 Training workspaces and validation workspaces are disjoint (``train`` and ``val``
 splits). Output: a JSON summary (``--json``) and a table on stdout.
 
@@ -72,12 +81,42 @@ def rays_through_opening(observer, q: np.ndarray, center: np.ndarray, ext: np.nd
     return ok.sum(1)
 
 
+class NearGlobal:
+    """``global``'s surface points from a pool of ``pool_size``, ``n_points`` of those within
+    ``radius`` of the robot's frame (duplicates where fewer; zeros where none), in the robot
+    frame with their normals."""
+
+    def __init__(self, robot, n_points: int = 256, pool_size: int = 16384, radius: float = 0.6) -> None:  # type: ignore[no-untyped-def]
+        self.robot, self.n_points, self.radius = robot, n_points, radius
+        self.inner = make_observer("global", robot, n_points=n_points, pool_size=pool_size)
+        self.scenes: list[Scene] = []
+
+    def bind(self, scenes: list[Scene]) -> None:
+        self.scenes = list(scenes)
+
+    def observe(self, q: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        out = np.zeros((len(q), self.n_points, 6), np.float32)
+        pos = self.robot.positions(q)
+        for e, scene in enumerate(self.scenes):
+            p, n = self.inner.points_of(scene)
+            idx = np.flatnonzero(np.linalg.norm(p - pos[e], axis=1) < self.radius)
+            if len(idx) == 0:
+                continue
+            pick = rng.choice(idx, self.n_points, replace=len(idx) < self.n_points)
+            pb, nb = self.robot.to_body_frame(q[e], p[pick], n[pick])
+            out[e] = np.concatenate([pb, nb], -1)
+        return out
+
+
 def collect(split: str, n_scenes: int, per_scene: int, observation: str, args: argparse.Namespace, seed: int) -> dict[str, np.ndarray]:
     scen = make_scenario("slot", "sshape")
     robot = scen.robot
-    observer = make_observer(observation, robot, **json.loads(args.observer_args))
+    if observation == "global-near":
+        observer = NearGlobal(robot, radius=args.near_radius)
+    else:
+        observer = make_observer(observation, robot, **json.loads(args.observer_args))
     rng = np.random.default_rng(seed)
-    obs, obs_solid, target, base, width, xs, through = [], [], [], [], [], [], []
+    obs, obs_solid, target, base, width, xs, through, axis = [], [], [], [], [], [], [], []
     low, high = scen.bounds
     lo, hi = low.copy(), high.copy()
     lo[0], hi[0] = args.x_min, args.x_max
@@ -91,6 +130,9 @@ def collect(split: str, n_scenes: int, per_scene: int, observation: str, args: a
         obs_solid.append(observer.observe(q, rng))
         c_body, _ = robot.to_body_frame(q, np.repeat(center[None, None], len(q), 0))
         w_body, _ = robot.to_body_frame(q, np.zeros((len(q), 1, 3)))  # the wall's centre
+        long = np.zeros(3)
+        long[scene.__dict__["slot"]["long_axis"]] = 1.0
+        axis.append(np.einsum("eji,j->ei", robot.rotations(q), long))  # R^T e: the long side in the robot frame
         obs.append(o)
         target.append(c_body[:, 0])
         base.append(w_body[:, 0])
@@ -105,6 +147,7 @@ def collect(split: str, n_scenes: int, per_scene: int, observation: str, args: a
         "base": np.concatenate(base).astype(np.float32),
         "width_bars": np.concatenate(width),
         "x": np.concatenate(xs),
+        "axis": np.concatenate(axis).astype(np.float32),
     }
     if through:
         out["through"] = np.concatenate(through)
@@ -122,11 +165,14 @@ class Probe(nn.Module):
 
 
 def train_probe(tr: dict[str, np.ndarray], va: dict[str, np.ndarray], args: argparse.Namespace, obs_key: str, target_key: str) -> np.ndarray:
+    """The probe's predictions of ``target_key`` on the validation observations; for
+    ``axis``, a direction either way round (the loss takes the nearer sign)."""
     torch.manual_seed(0)
     scale = 0.4  # points and targets in units of 0.4, as the local observer's points are
+    unsigned = target_key == "axis"
     xt = torch.from_numpy(tr[obs_key]).clone()
     xt[..., :3] /= scale
-    yt = torch.from_numpy(tr[target_key]) / scale
+    yt = torch.from_numpy(tr[target_key]) / (1.0 if unsigned else scale)
     xv = torch.from_numpy(va[obs_key]).clone()
     xv[..., :3] /= scale
     model = Probe(xt.shape[-1], args.width)
@@ -139,7 +185,11 @@ def train_probe(tr: dict[str, np.ndarray], va: dict[str, np.ndarray], args: argp
         tot = 0.0
         for b in range(0, n, 256):
             idx = perm[b : b + 256]
-            loss = ((model(xt[idx]) - yt[idx]) ** 2).sum(-1).mean()
+            pred = model(xt[idx])
+            err = ((pred - yt[idx]) ** 2).sum(-1)
+            if unsigned:
+                err = torch.minimum(err, ((pred + yt[idx]) ** 2).sum(-1))
+            loss = err.mean()
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -149,8 +199,14 @@ def train_probe(tr: dict[str, np.ndarray], va: dict[str, np.ndarray], args: argp
             print(f"  epoch {epoch + 1}: train rms {np.sqrt(tot / n) * scale:.4f}", flush=True)
     model.eval()
     with torch.no_grad():
-        pred = torch.cat([model(xv[b : b + 1024]) for b in range(0, len(xv), 1024)]).numpy() * scale
-    return pred
+        pred = torch.cat([model(xv[b : b + 1024]) for b in range(0, len(xv), 1024)]).numpy()
+    return pred if unsigned else pred * scale
+
+
+def axis_degrees(pred: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Angles (degrees) between predicted and true directions, either sign."""
+    c = np.abs(np.sum(pred * axis, -1)) / np.maximum(np.linalg.norm(pred, axis=-1), 1e-9)
+    return np.degrees(np.arccos(np.clip(c, 0.0, 1.0)))
 
 
 def rms(a: np.ndarray) -> float:
@@ -166,6 +222,8 @@ def main() -> None:
     ap.add_argument("--x-max", type=float, default=-0.1)
     ap.add_argument("--observations", nargs="+", default=["local", "global"])
     ap.add_argument("--observer-args", default="{}", help="keyword arguments of the observers, as JSON (e.g. '{\"max_range\": 2.0}')")
+    ap.add_argument("--near-radius", type=float, default=0.6, help="global-near: points within this distance of the robot's frame")
+    ap.add_argument("--axis", action="store_true", help="also probe which way the opening's long side runs")
     ap.add_argument("--epochs", type=int, default=40)
     ap.add_argument("--width", type=int, default=128)
     ap.add_argument("--threads", type=int, default=1)
@@ -184,11 +242,22 @@ def main() -> None:
             print(f" probe {name}", flush=True)
             errs[name] = train_probe(tr, va, args, obs_key, target_key) - va[target_key]
         errs["pose_known"] = va["base"] - va["target"]
+        axis_deg = {}
+        if args.axis:
+            for name, obs_key in (("opening", "obs"), ("closed", "obs_solid")):
+                print(f" probe axis, {name}", flush=True)
+                axis_deg[name] = axis_degrees(train_probe(tr, va, args, obs_key, "axis"), va["axis"])
         near = va["x"] > (args.x_min + args.x_max) / 2
         row: dict[str, object] = {"rms": {k: rms(e) for k, e in errs.items()}, "by_width": {}}
         for lo_b, hi_b in bins:
             m = (va["width_bars"] >= lo_b) & (va["width_bars"] < hi_b)
             row["by_width"][f"{lo_b}-{int(hi_b)}"] = {"n": int(m.sum()), **{k: rms(e[m]) for k, e in errs.items()}}  # type: ignore[index]
+        if axis_deg:
+            row["axis_degrees_mean"] = {k: float(v.mean()) for k, v in axis_deg.items()}
+            row["axis_within_30_degrees"] = {k: float(np.mean(v < 30)) for k, v in axis_deg.items()}
+            row["axis_degrees_by_width"] = {
+                f"{a}-{int(b)}": {k: float(v[(va["width_bars"] >= a) & (va["width_bars"] < b)].mean()) for k, v in axis_deg.items()} for a, b in bins
+            }
         row["near_half"] = {k: rms(e[near]) for k, e in errs.items()}
         row["far_half"] = {k: rms(e[~near]) for k, e in errs.items()}
         if "through" in va:
