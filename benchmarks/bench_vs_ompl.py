@@ -233,15 +233,16 @@ def step_parts(planner: Any, problems: list[Problem], reps: int = 200) -> dict[s
             else:
                 K._edge_free(q, goal, 0.01, 0.01, low, high, bc, br, bh)
 
-    (wflat, layout), scale, fparams, iparams = planner._net
+    compiled = planner.engine.compiled()
+    wflat, layout, scale, fparams, iparams = compiled.args
     n_points = int(iparams[K.I_N_POINTS])
     names = ("point draw", "network", "move (q_free)", "goal quick test", "goal certified check")
     out: dict[str, list[float]] = {k: [] for k in names}
     for p in problems:
-        planner._observer.set_scene(0, p.scene)
-        pts, nrm, boxes = planner._scene_inputs(p.scene)
+        _, _, *bx, pts, nrm = compiled._scene_inputs(p.scene)[:7]
+        boxes = tuple(bx)
         count = len(pts)
-        u = planner._uniforms(count + n_points)[: count + n_points]
+        u = planner.engine._uniforms(count + n_points)[: count + n_points]
         idx = np.empty(n_points, np.int64)
         K._select(u, count, n_points, idx)
         s32 = float(fparams[K.F_S32])
@@ -299,7 +300,7 @@ def main() -> None:
                 pl = planners[n]
                 if n in ("policy", "policy-python", "policy-nogreedy"):  # the observer's point set of a new scene, timed apart
                     t = time.perf_counter()
-                    pl._observer.set_scene(0, p.scene)  # computes and caches the points
+                    pl.engine.observer.set_scene(0, p.scene)  # computes and caches the points
                     scene_prep.append(time.perf_counter() - t)
                 c = time.thread_time()
                 t = time.perf_counter()

@@ -68,8 +68,10 @@ def test_compiled_action_matches_the_numpy_actor(problems: list[Problem]) -> Non
     policy = Policy.from_checkpoint(shipped_checkpoint("disc2d"))
     fast = NumpyPointNetActor.from_actor(policy.actor)
     assert fast is not None
-    (wflat, layout), scale, _, _ = planner._net
-    obs_ = planner._observer
+    compiled = planner.engine.compiled()
+    assert compiled is not None
+    wflat, layout, scale = compiled.args[:3]
+    obs_ = planner.engine.observer
     rng = np.random.default_rng(2)
     worst = 0.0
     for p in problems[:10]:
@@ -78,7 +80,7 @@ def test_compiled_action_matches_the_numpy_actor(problems: list[Problem]) -> Non
         for _ in range(5):
             q = rng.uniform(p.scene.low, p.scene.high)
             u = rng.random(obs_.draws_one())
-            ref = planner._act(obs_.observe_one(q, u=u), q, p.goal)  # numpy actor on the built observation
+            ref = planner.engine._act(obs_.observe_one(q, u=u), q, p.goal, None)  # numpy actor on the built observation
             got = K.pointnet_action(q, p.goal, u, obs_.n_points, pts, nrm, float(np.float32(0.07)), wflat, layout, scale, 2)
             worst = max(worst, float(np.abs(got - ref).max()))
     assert worst < 1e-5
@@ -128,10 +130,11 @@ def test_compiled_rollout_hands_an_escape_over_to_the_numpy_one() -> None:
     """With an escape (the sphere's default), the compiled rollout runs up to the step
     that starts the first escape and the numpy rollout goes on from there: the same
     paths, successes, step counts and escapes as the numpy rollout from the start."""
-    from pointplan.planners.policy import _K_END_ESCAPE, PolicyPlanner
+    from pointplan.planners.policy import PolicyPlanner
+    from pointplan.planners.rollout_compiled import END_NAMES
     from pointplan.scenes.scenarios import make_scenario
 
-    assert _K_END_ESCAPE == K.END_ESCAPE
+    assert END_NAMES[K.END_ESCAPE] == "escape" and END_NAMES[K.END_GREEDY] == "goal" and END_NAMES[K.END_STALLED] == "stalled"
     sc = make_scenario("boxes3d", robot="sphere3d")
     ckpt = shipped_checkpoint("sphere3d", "global")
     a = PolicyPlanner(ckpt, robot=sc.robot)

@@ -414,7 +414,7 @@ class PPORun:
 
     # ------------------------------------------------------------------ validation
     def validate(self) -> dict[str, float]:
-        from ..planners.policy import ESCAPE_DEFAULTS, rollout_batch
+        from ..planners.rollout import ESCAPE_DEFAULTS, rollout_batch
 
         robot, actor = self.robot, self.actor
         env = EnvConfig(observation=self.meta["observation"], n_points=self.meta["n_points"], split="val")

@@ -20,9 +20,18 @@ Array = NDArray[np.float64]
 
 
 class Observer(ABC):
-    """Base class. Subclasses define ``name``, ``space`` and ``observe``."""
+    """Base class. Subclasses define ``name``, ``space`` and ``observe``.
+
+    Capabilities the rollout engine (:mod:`pointplan.planners.rollout`) chooses its
+    stepper by: ``one_robot``, the observer has ``observe_one(q, u=...)`` and
+    ``draws_one()``, which give the observation ``observe`` would draw for one robot in
+    its one bound static scene from a block of uniform numbers; ``compiled_points``, that
+    observation is a uniform subset of ``points_one()`` in the robot's frame, drawn as
+    :class:`PointSetObserver` draws it (the compiled rollout reproduces it)."""
 
     name: str
+    one_robot: bool = False
+    compiled_points: bool = False
 
     def __init__(self, robot: Robot) -> None:
         self.robot = robot
@@ -71,6 +80,8 @@ class PointSetObserver(Observer):
     random subset (or padded by duplicates), expressed in the robot frame."""
 
     with_normals: bool = False
+    one_robot = True
+    compiled_points = True
 
     def __init__(self, robot: Robot, n_points: int = 64, spacing: float = 0.015) -> None:
         super().__init__(robot)

@@ -89,6 +89,8 @@ def farthest_point_subset(points: Array, n: int, first: int) -> NDArray[np.int64
 class PerturbedPoints(PointSetObserver):
     """A point-set observer whose observations are perturbed (see the module)."""
 
+    compiled_points = False  # its own observe_one: not a plain subset of the points
+
     def __init__(
         self,
         base: PointSetObserver,

@@ -1,0 +1,150 @@
+"""The compiled form of the rollout engine's one-robot rollout: a translating ball (the
+disc, the sphere) among boxes, seeing a uniform subset of the scene's points, with a
+PointNet in numpy, stepped in one numba call (:func:`._policy_kernels._rollout`: the same
+greedy goal test, action, move and end tests as the step loop of
+:mod:`pointplan.planners.rollout`, in the same arithmetic).
+
+Most of a call's time beyond the network is not arithmetic but memory: a caller does
+other work between plans, and every Python and numpy operation here then waits for code
+and data the call has not touched for a while (measured: a plain ``np.empty`` or
+``np.asarray`` takes 5-15 us in that state instead of 0.2). So this path does as few
+operations as it can: the kernel's arguments are prepared once per engine and per scene
+(the last scene's are kept), the kernel writes the whole path (the goal included) into
+one array and returns plain integers, and the result's ``info`` comes from a per-end-code
+table.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..geometry.shapes import Box
+from ..robots.point import Disc2D, Sphere3D
+from ..scenes.scene import Problem, Scene
+from . import _policy_kernels as K
+from .base import PlanResult
+
+if TYPE_CHECKING:
+    from .rollout import RolloutEngine, _State
+
+_F64 = np.dtype(np.float64)
+#: ``info["end"]`` of the compiled rollout's end codes (``_policy_kernels.END_*``)
+END_NAMES = ("horizon", "stalled", "goal", "goal", "near-goal", "near-goal", "escape")
+
+
+class CompiledBall:
+    """The compiled rollout of one engine (see the module's docstring); made by :meth:`build`."""
+
+    def __init__(self, engine: RolloutEngine, weights: tuple[np.ndarray, np.ndarray], scale: np.ndarray, fparams: np.ndarray, iparams: np.ndarray) -> None:
+        self.engine = engine
+        self.args = (*weights, scale, fparams, iparams)
+        self._scene: Scene | None = None
+        self._scene_args: tuple[np.ndarray, ...] | None = None
+        self._path_shape = (engine.horizon + 2, engine.robot.config_dim)
+        self._end_entries = self._end_table()
+
+    @classmethod
+    def build(cls, engine: RolloutEngine) -> CompiledBall | None:
+        """The compiled rollout of ``engine``, or ``None`` where it does not apply (not a
+        ball, not a PointNet in numpy, hidden layers of another width)."""
+        fast, robot, env, opts, esc = engine.fast, engine.robot, engine.env, engine.options, engine.escape
+        if fast is None or not isinstance(robot, (Disc2D, Sphere3D)):
+            return None
+        width = fast.inp[0].shape[1]
+        if any(w.shape != (width, width) for w, _ in fast.hidden) or fast.head[0][0].shape[0] != width + robot.dim:
+            return None
+        fparams = np.zeros(7)
+        fparams[[K.F_RADIUS, K.F_SUBSTEP, K.F_GOAL_TOL, K.F_STALL_DIST, K.F_RESOLUTION, K.F_S32, K.F_ESC_STILL]] = (
+            robot.radius,
+            env.substep,
+            env.goal_tolerance,
+            opts.stall_distance,
+            0.01,  # the goal edge: as connect_to_goal checks it
+            float(np.float32(robot.action_scale[0])),
+            esc.still if esc.on else 0.0,
+        )
+        iparams = np.zeros(8, np.int64)
+        iparams[[K.I_HORIZON, K.I_STALL_STEPS, K.I_GREEDY, K.I_CONNECT, K.I_CLIP, K.I_N_POINTS, K.I_ACTION_DIM, K.I_ESC_WINDOW]] = [
+            int(engine.horizon),
+            int(opts.stall_steps or 0),
+            int(opts.greedy_goal),
+            int(opts.connect_goal),
+            int(env.bounds == "clip"),
+            int(engine.observer.n_points),
+            int(fast.action_dim),
+            int(esc.window) if esc.on else 0,  # the compiled rollout stops where an escape starts
+        ]
+        return cls(engine, K.pack_weights(fast.inp, fast.hidden, fast.head), np.ascontiguousarray(robot.action_scale, np.float64), fparams, iparams)
+
+    def rollout(self, problem: Problem, t0: float) -> tuple[PlanResult | None, _State | None, float | None]:
+        """``(result, None, None)``: the whole rollout; ``(None, state, seconds)``: it stopped
+        where an escape starts, and the step loop goes on from ``state``; ``(None, None,
+        None)``: the scene is not boxes only (or has no points)."""
+        from .rollout import _State
+
+        scene = problem.scene
+        if scene is not self._scene:
+            self._scene_args = self._scene_inputs(scene)
+            self._scene = scene
+        args = self._scene_args
+        if args is None:
+            return None, None, None
+        start, goal = problem.start, problem.goal
+        if start.dtype is not _F64 or goal.dtype is not _F64:
+            start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
+        path = np.empty(self._path_shape)
+        t1 = time.perf_counter()
+        end, rows, checks, _ = K._rollout(start, goal, *args, path)  # type: ignore[call-arg]
+        t2 = time.perf_counter()
+        if end == K.END_ESCAPE:
+            eng = self.engine
+            return None, _State.resumed(path[:rows].copy(), goal, eng.horizon, eng.options.greedy_goal, checks), t2 - t1
+        success, to_goal, entries = self._end_entries[end]
+        steps = rows - 1 - to_goal
+        info = {"time_split": {"observe": 0.0, "network": 0.0, "motion": 0.0, "goal": 0.0, "compiled": t2 - t1, "steps": steps}, **entries}
+        return PlanResult(path[:rows], success, steps, checks, time.perf_counter() - t0, info=info), None, None
+
+    def _scene_inputs(self, scene: Scene) -> tuple[Any, ...] | None:
+        """The kernel's arguments after the start and the goal for ``scene`` (its bounds and
+        boxes, the observer's points, the engine's arguments, the random stream long
+        enough for the scene), or ``None`` when the scene has obstacles other than boxes
+        or no points."""
+        observer = self.engine.observer
+        observer.set_scene(0, scene)
+        world, obstacles = scene.world, scene.obstacles
+        if world.batch_shape != () or world.box_c.shape[0] != len(obstacles) or not all(type(o) is Box for o in obstacles):
+            return None
+        pts, nrm = observer.points_one()
+        if not len(pts):
+            return None
+        f = np.ascontiguousarray
+        nrm = f(nrm, np.float64) if observer.with_normals else np.zeros((len(pts), 0))
+        boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        stream = self.engine._uniforms(self.engine.horizon * (max(len(pts), 1) + observer.n_points))
+        return (scene.low, scene.high, *boxes, f(pts, np.float64), nrm, *self.args, stream)
+
+    def _end_table(self) -> tuple[tuple[bool, bool, dict[str, Any]], ...]:
+        """Per end code: success, whether the path ends at the goal, and the ``info``
+        entries of the result (those the step loop sets)."""
+        rows = []
+        opts = self.engine.options
+        for end, name in enumerate(END_NAMES):
+            to_goal = end in (K.END_GREEDY, K.END_TOL_GOAL)
+            success = to_goal or end in (K.END_TOL_BLOCKED, K.END_TOL)
+            entries: dict[str, Any] = {"end": name}
+            if self.engine.escape.on:
+                entries["escapes"] = 0  # (a rollout that escapes goes on in the step loop, which counts them)
+            if end == K.END_GREEDY:
+                entries["greedy_goal"] = True
+            if to_goal or end == K.END_TOL_BLOCKED:
+                entries["goal_connection"] = "free" if to_goal else "blocked"
+            elif opts.connect_goal and not success:
+                entries["goal_connection"] = None
+            rows.append((success, to_goal, entries))
+        return tuple(rows)
+
+
+__all__ = ["END_NAMES", "CompiledBall"]
