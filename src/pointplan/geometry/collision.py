@@ -346,9 +346,7 @@ class CollisionWorld:
                 tree = self.cloud_trees[i]
                 if tree is None:
                     continue
-                pts = tree.data
-                d2 = sphere_box_sqdist(pts, ci, ri, hi)  # (P, M)
-                inside = np.any(d2 <= 0.0, 0)
+                inside = boxes_contain_cloud_points(tree, ci, ri, hi)
                 if self.batch_shape == ():
                     hit |= inside
                 else:
@@ -422,6 +420,77 @@ class CollisionWorld:
             else:
                 out[i] |= res
         return out
+
+
+def _sub_boxes(c: Array, rot: Array, h: Array, cap: int = 512) -> tuple[Array, Array, NDArray[np.int64]]:
+    """Cover each box ``c: (M, d)``, ``rot: (M, d, d)``, ``h: (M, d)`` by near-cubic
+    pieces (each axis cut into ``ceil(h_i / min h)`` equal parts, at most ``cap`` pieces
+    a box): their centres, the radius of the ball around each piece, and the box each
+    piece belongs to. The balls cover the box, and hug it far closer than its own
+    circumscribed ball does when it is long and thin."""
+    m, d = h.shape
+    counts = np.ceil(h / np.maximum(h.min(-1, keepdims=True), 1e-12) - 1e-9).astype(np.int64).clip(1, None)
+    while np.any(big := counts.prod(-1) > cap):
+        counts[big] = np.maximum(counts[big] // 2, 1)
+    per = counts.prod(-1)
+    owner = np.repeat(np.arange(m), per)
+    # the piece's index along each axis, then its centre offset in the box's frame
+    k = np.arange(len(owner)) - np.repeat(np.cumsum(per) - per, per)
+    local = np.empty((len(owner), d))
+    stride = np.ones((m, d), np.int64)
+    for i in range(d - 2, -1, -1):
+        stride[:, i] = stride[:, i + 1] * counts[:, i + 1]
+    for i in range(d):
+        n_i, h_i = counts[owner, i], h[owner, i]
+        j = (k // stride[owner, i]) % n_i
+        local[:, i] = -h_i + (2 * j + 1) * h_i / n_i
+    centres = c[owner] + np.einsum("pij,pj->pi", rot[owner], local)
+    radius = np.sqrt(np.sum((h / counts) ** 2, -1))[owner]
+    return centres, radius, owner
+
+
+def boxes_contain_cloud_points(tree: cKDTree, c: Array, rot: Array, h: Array) -> Bool:
+    """Does any point of the cloud in ``tree`` lie in (or on) each box ``c: (..., d)``,
+    ``rot: (..., d, d)``, ``h: (..., d)``? Only the points near a box are tested: the
+    k-d tree rules out the boxes with no point within their circumscribed ball (most, in
+    free space), then finds the points in balls around near-cubic pieces of the others
+    (:func:`_sub_boxes`: the nearest point first, then a ball query), and each is tested with :func:`sphere_box_sqdist`'s arithmetic against
+    the box itself, so the answer is the brute-force one at a cost that grows with the
+    points near the boxes, not with the cloud."""
+    shape = c.shape[:-1]
+    d = c.shape[-1]
+    fc, fr, fh = c.reshape(-1, d), rot.reshape(-1, d, d), h.reshape(-1, d)
+    out = np.zeros(len(fc), dtype=bool)
+    if not len(fc) or not tree.n:
+        return out.reshape(shape)
+    # boxes with no point within their circumscribed ball are free: most, in free space
+    reach = np.sqrt(np.sum(fh * fh, -1)) * (1.0 + 1e-9) + 1e-12
+    dist, _ = tree.query(fc, k=1, distance_upper_bound=float(reach.max()))
+    boxes = np.flatnonzero(dist <= reach)
+    if not len(boxes):
+        return out.reshape(shape)
+    centres, radius, piece_owner = _sub_boxes(fc[boxes], fr[boxes], fh[boxes])
+    piece_owner = boxes[piece_owner]
+    radius = radius * (1.0 + 1e-9) + 1e-12  # a point in a piece is this close to its centre
+    dist, _ = tree.query(centres, k=1, distance_upper_bound=float(radius.max()))
+    near = np.flatnonzero(dist <= radius)
+    if not len(near):
+        return out.reshape(shape)
+    lists = tree.query_ball_point(centres[near], radius[near], return_sorted=False)
+    counts = np.array([len(x) for x in lists], np.int64)
+    idx = np.concatenate(lists).astype(np.int64) if len(lists) else np.zeros(0, np.int64)
+    owner = np.repeat(piece_owner[near], counts)
+    diff = tree.data[idx] - fc[owner]
+    r = fr[owner]
+    d2 = np.zeros(len(idx))
+    for i in range(d):  # as sphere_box_sqdist: local_i = sum_j diff_j R_ji, in the same order
+        local = diff[:, 0] * r[:, 0, i]
+        for j in range(1, d):
+            local = local + diff[:, j] * r[:, j, i]
+        excess = np.maximum(np.abs(local) - fh[owner, i], 0.0)
+        d2 += excess * excess
+    out[owner[d2 <= 0.0]] = True
+    return out.reshape(shape)
 
 
 def _bounding_sphere(s: Shape) -> tuple[Array, float]:

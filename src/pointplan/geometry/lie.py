@@ -145,7 +145,7 @@ def se2_exp(xi: Array) -> Array:
     small = np.abs(th) < 1e-6
     ts = np.where(small, 1.0, th)
     a = np.where(small, 1.0 - th**2 / 6.0, np.sin(ts) / ts)
-    b = np.where(small, th / 2.0, (1.0 - np.cos(ts)) / ts)
+    b = np.where(small, th / 2.0, 2.0 * np.sin(ts / 2.0) ** 2 / ts)  # (1 - cos) / th without the cancellation
     vmat = np.stack([np.stack([a, -b], -1), np.stack([b, a], -1)], -2)
     out = np.zeros(xi.shape[:-1] + (3, 3))
     out[..., :2, :2] = so2_exp(th)
@@ -161,7 +161,7 @@ def se2_log(t: Array) -> Array:
     small = np.abs(th) < 1e-6
     ts = np.where(small, 1.0, th)
     a = np.where(small, 1.0 - th**2 / 6.0, np.sin(ts) / ts)
-    b = np.where(small, th / 2.0, (1.0 - np.cos(ts)) / ts)
+    b = np.where(small, th / 2.0, 2.0 * np.sin(ts / 2.0) ** 2 / ts)  # (1 - cos) / th without the cancellation
     det = a * a + b * b
     vinv = np.stack([np.stack([a, b], -1), np.stack([-b, a], -1)], -2) / det[..., None, None]
     v = np.einsum("...ij,...j->...i", vinv, t[..., :2, 2])
