@@ -23,7 +23,7 @@ from pointplan.scenes.io import SceneFile, SceneFormatError, load_scene, save_sc
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "scenes" / "narrow_example.json"
-DOCS = ROOT / "docs" / "scenes.md"
+DOCS = ROOT / "docs" / "guide" / "scene-files.md"
 
 
 # ============================================================================ fixtures
@@ -178,7 +178,7 @@ def _json_blocks(text: str) -> list[dict[str, Any]]:
 
 
 def test_documented_examples_load(tmp_path: Path) -> None:
-    """Every complete scene example in docs/scenes.md is a valid file."""
+    """Every complete scene example in docs/guide/scene-files.md is a valid file."""
     docs = [d for d in _json_blocks(DOCS.read_text()) if isinstance(d, dict) and d.get("format") == "pointplan-scene"]
     assert {d["dim"] for d in docs} == {2, 3}
     for i, doc in enumerate(docs):
