@@ -272,12 +272,13 @@ def cmd_eval(args: argparse.Namespace) -> int:
     _check_checkpoint(args, names)
     scenario = _scenario(args)
     problems = _test_problems(scenario, args, args.episodes)
+    pool = _pool(args)
     results: dict[str, dict[str, Any]] = {}
     interrupted = None
     for name in names:
         planner = _planner(name, scenario.robot, args, args.seed)
         _say_shipped(name, planner, args)
-        report = evaluate(planner, problems, scenario.robot, progress=not args.quiet, **_scale(args))
+        report = evaluate(planner, problems, scenario.robot, progress=not args.quiet, pool=pool)
         results[name] = report.metrics()
         interrupted = report.interrupted
         if interrupted:
@@ -291,23 +292,44 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return 130 if interrupted else 0
 
 
-def _scale(args: argparse.Namespace) -> dict[str, Any]:
-    """``workers`` and ``address`` for :func:`evaluate` (checked: Ray must be installed to
-    use them)."""
+def _workers(args: argparse.Namespace) -> tuple[int | None, str | None] | None:
+    """``(workers, address)`` when ``--workers`` / ``--address`` ask for Ray workers
+    (checked: Ray must be installed to use them), else None."""
     from .distributed import RAY_MISSING, ray_available, wants_ray
 
     workers, address = getattr(args, "workers", None), getattr(args, "address", None)
     if not wants_ray(workers, address):
-        return {}
+        return None
     if not ray_available():
         raise CLIError(RAY_MISSING)
-    return {"workers": workers, "address": address}
+    return workers, address
+
+
+def _pool(args: argparse.Namespace) -> Any:
+    """The Ray worker pool of ``--workers`` / ``--address`` for :func:`evaluate`, or None
+    (one process)."""
+    scale = _workers(args)
+    if scale is None:
+        return None
+    from .distributed import RayPool
+
+    return RayPool(*scale)
+
+
+def _demo_pool(workers: int, address: str | None) -> Any:
+    """Ray workers to plan demonstrations on when asked for and Ray is installed; None
+    leaves it to the trainer (one process, or local processes without Ray)."""
+    from .distributed import RayPool, ray_available, wants_ray
+
+    if wants_ray(workers, address) and ray_available():
+        return RayPool(workers if workers > 1 else None, address)
+    return None
 
 
 def _test_problems(scenario: Any, args: argparse.Namespace, n: int) -> Any:
     """The first ``n`` test problems; on Ray workers a registered scenario's problems
     travel as their recipe and are rebuilt by the workers (the same problems)."""
-    if _scale(args) and not getattr(scenario, "fixed", None) and not getattr(args, "scene", None):
+    if _workers(args) and not getattr(scenario, "fixed", None) and not getattr(args, "scene", None):
         from .distributed import ScenarioProblems
 
         return ScenarioProblems.of(scenario, "test", n, seed=args.seed)
@@ -416,7 +438,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         if fault:
             raise CLIError(f"the problem of --start and --goal cannot be solved: its {fault} with an obstacle")
     planner = _planner(args.planner, scenario.robot, args, args.seed)
-    report = evaluate(planner, problems, scenario.robot, progress=not args.quiet, **_scale(args))
+    report = evaluate(planner, problems, scenario.robot, progress=not args.quiet, pool=_pool(args))
     print(format_table({args.planner: report.metrics()}))
     invalid = [r for r in report.records if r.invalid]
     for rec in invalid:
@@ -598,8 +620,13 @@ def cmd_train(args: argparse.Namespace) -> int:
         base = TrainConfig(**_learner_fields(args))
         cfg = replace_paths(base, given_options(args, TRAIN_OPTIONS))
         run_dir = args.run_dir or "runs/latest"
-    scale = _scale(args)
-    res = train(cfg, run_dir, progress=not args.quiet, resume=args.resume, sync_every=args.sync_every, **scale)
+    scale = _workers(args)
+    rollouts = None
+    if scale is not None:
+        from .distributed.rollouts import ray_rollouts
+
+        rollouts = ray_rollouts(*scale, sync_every=args.sync_every)
+    res = train(cfg, run_dir, progress=not args.quiet, resume=args.resume, sync_every=args.sync_every, rollouts=rollouts)
     print(f"best validation success {res.best_success:.3f} after {res.steps} env steps, {res.wall_time_s:.0f} s; checkpoints in {res.run_dir}")
     summary = {
         "run_dir": str(res.run_dir),
@@ -651,9 +678,10 @@ def cmd_bc(args: argparse.Namespace) -> int:
     else:
         bc = BCConfig(**_learner_fields(args))
         cfg = replace_paths(DaggerConfig(bc, rounds=args.dagger_rounds), given)
+    pool = _demo_pool(cfg.bc.workers, cfg.bc.address)
     if args.dagger_rounds or args.resume:
         run_dir = args.run_dir or (str(Path(args.resume).parent) if args.resume else "runs/latest")
-        summary = train_dagger(cfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume)
+        summary = train_dagger(cfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume, pool=pool)
     elif cfg.expert.startswith("slot-threading"):
         from .learning.dagger import first_demos
         from .scenes.scenarios import make_scenario
@@ -663,7 +691,7 @@ def cmd_bc(args: argparse.Namespace) -> int:
         demos = first_demos(cfg, make_scenario(cfg.bc.env, robot=cfg.bc.robot), Path(cfg.bc.demos_file or run_dir / "demos.npz"), not args.quiet)
         summary = train_bc(cfg.bc, run_dir, progress=not args.quiet, demos=demos)
     else:
-        summary = train_bc(cfg.bc, args.run_dir or "runs/latest", progress=not args.quiet)
+        summary = train_bc(cfg.bc, args.run_dir or "runs/latest", progress=not args.quiet, pool=pool)
     print(_bc_line(summary))
     _write_json(args.json, summary)
     return 0
@@ -798,7 +826,7 @@ def cmd_mpnet_train(args: argparse.Namespace) -> int:
     except ValueError as e:
         raise CLIError(f"mpnet-train: {e}") from None
     cfg = replace_paths(MPNetTrainConfig(env=args.env, robot=args.robot), given_options(args, MPNET_OPTIONS))
-    res = train_mpnet(cfg, args.run_dir, progress=not args.quiet)
+    res = train_mpnet(cfg, args.run_dir, progress=not args.quiet, pool=_demo_pool(cfg.workers, None))
     v = res.best_val
     print(
         f"best validation success {v.get('val_success', float('nan')):.3f} at epoch {res.best_epoch} "
@@ -844,7 +872,7 @@ def cmd_lsample_train(args: argparse.Namespace) -> int:
     from .learning.lsample import LSampleConfig, train_lsample
 
     cfg = replace_paths(LSampleConfig(), given_options(args, LSAMPLE_OPTIONS))
-    summary = train_lsample(cfg, args.run_dir, progress=not args.quiet)
+    summary = train_lsample(cfg, args.run_dir, progress=not args.quiet, pool=_demo_pool(cfg.workers, None))
     best = summary["best_val_nodes_0.9"]
     print(
         f"trained on {summary['train_configs']} configurations of {summary['train_problems']} Bi-RRT solutions, {summary['epochs']} epochs, "

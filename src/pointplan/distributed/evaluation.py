@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 from typing import Any, overload
 
+from ..evaluation.evaluate import EvalReport, evaluate, set_call_number
 from ..robots.base import Robot
 from ..scenes.scene import Problem
+from .tasks import RayPool
+
+__all__ = ["ScenarioProblems", "evaluate_parallel", "set_call_number"]
 
 
 class ScenarioProblems(Sequence[Problem]):
@@ -58,23 +61,6 @@ class ScenarioProblems(Sequence[Problem]):
         return self._built[i]
 
 
-def set_call_number(planner: Any, number: int) -> None:
-    """Make ``planner``'s next ``plan`` call the ``number``-th one (counted from 0), for a
-    planner that numbers its calls in ``calls`` (Bi-RRT seeds each call with
-    ``(seed, call number)``); others are left alone."""
-    if isinstance(getattr(planner, "calls", None), int):
-        planner.calls = int(number)
-
-
-def _plan_and_check(pos: int, planner: Any, problems: Sequence[Problem], robot: Robot, first_call: int, resolution: float, tolerance: float) -> Any:
-    """One problem of an evaluation, in a worker: what the serial loop of
-    :func:`~pointplan.evaluation.evaluate` does for it."""
-    from ..evaluation.evaluate import plan_and_check
-
-    set_call_number(planner, first_call + pos)
-    return plan_and_check(planner, problems[pos], robot, resolution, tolerance)
-
-
 def evaluate_parallel(
     planner: Any,
     problems: Sequence[Problem],
@@ -84,46 +70,11 @@ def evaluate_parallel(
     tolerance: float = 0.07,
     workers: int | None = None,
     address: str | None = None,
-) -> Any:
+) -> EvalReport:
     """:func:`~pointplan.evaluation.evaluate` on Ray workers: the same records in the same
     order (times aside). Each worker plans with its own copy of ``planner``; afterwards
     ``planner`` here counts the calls as if it had planned them all.
 
     On Ctrl-C the running tasks are cancelled and the report holds the problems that
     finished (in problem order); its ``interrupted`` attribute is ``(finished, total)``."""
-    from ..evaluation.evaluate import EvalReport
-    from . import Interrupted, map_ordered
-
-    report = EvalReport(planner=str(getattr(planner, "name", type(planner).__name__)))
-    n = len(problems)
-    first_call = int(getattr(planner, "calls", 0) or 0)
-    bar = None
-    solved = [0, 0]
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=n, desc=report.planner, unit="problem")
-
-    def tick(_: int, rec: Any) -> None:
-        solved[0] += bool(rec.success)
-        solved[1] += 1
-        if bar is not None:
-            bar.update()
-            bar.set_postfix(success=f"{solved[0] / solved[1]:.1%}")
-
-    try:
-        records = map_ordered(
-            _plan_and_check, range(n), workers=workers, address=address, shared=(planner, problems, robot, first_call, resolution, tolerance), on_result=tick
-        )
-        interrupted = None
-    except Interrupted as stop:
-        records = [stop.results[i] for i in sorted(stop.results)]
-        interrupted = (len(records), n)
-        print(f"\ninterrupted: kept the {len(records)} of {n} problems that finished", file=sys.stderr)
-    finally:
-        if bar is not None:
-            bar.close()
-    report.records.extend(records)
-    report.interrupted = interrupted
-    set_call_number(planner, first_call + n)
-    return report
+    return evaluate(planner, problems, robot, progress, resolution, tolerance, pool=RayPool(workers, address))

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import signal
 import threading
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -127,7 +128,7 @@ class RayRollouts:
 
     def __init__(self, cfg: Any, workers: int | None, address: str | None, sync_every: int = SYNC_EVERY, steps_per_call: int = STEPS_PER_CALL) -> None:
         from ..models.checkpoint import to_dict
-        from . import cluster_cpus, connect
+        from .tasks import cluster_cpus, connect
 
         ray = connect(workers, address)
         self.ray = ray
@@ -211,3 +212,13 @@ class RayRollouts:
         if self._old_handler is not None:
             signal.signal(signal.SIGINT, self._old_handler)
             self._old_handler = None
+
+
+def ray_rollouts(workers: int | None, address: str | None, sync_every: int | None = None) -> Callable[[Any], RayRollouts]:
+    """The ``rollouts`` factory :func:`pointplan.learning.train.train` takes: Ray rollout
+    workers on this machine (``workers``) or a cluster (``address``)."""
+
+    def start(cfg: Any) -> RayRollouts:
+        return RayRollouts(cfg, workers, address, sync_every or SYNC_EVERY)
+
+    return start

@@ -7,7 +7,7 @@ from typing import Any
 import gymnasium as gym
 
 from .core import BatchedCore, EnvConfig, q_free
-from .planning_env import PlanningEnv, PlanningVectorEnv
+from .planning_env import PlanningEnv, PlanningVectorEnv, set_renderer
 
 #: scenario name -> Gymnasium id. Settings are keyword arguments of ``gymnasium.make``:
 #: ``robot`` (3D ids: ``sphere3d`` or ``sshape``), and the fields of :class:`EnvConfig`
@@ -51,4 +51,4 @@ def register_envs() -> None:
         )
 
 
-__all__ = ["ENV_IDS", "BatchedCore", "EnvConfig", "PlanningEnv", "PlanningVectorEnv", "make_env", "make_vector_env", "q_free", "register_envs"]
+__all__ = ["ENV_IDS", "BatchedCore", "EnvConfig", "PlanningEnv", "PlanningVectorEnv", "make_env", "make_vector_env", "q_free", "register_envs", "set_renderer"]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -11,9 +11,21 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from numpy.typing import NDArray
 
+from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Problem
 from .core import Array, BatchedCore, EnvConfig
+
+#: draws ``(problem, robot, q)`` as an RGB image for ``render_mode="rgb_array"``
+Renderer = Callable[[Problem, Robot, Array], NDArray[np.uint8]]
+_renderer: Renderer | None = None
+
+
+def set_renderer(renderer: Renderer | None) -> None:
+    """Install what :meth:`PlanningEnv.render` draws with (the package root installs
+    :func:`pointplan.viz.plot2d.render_rgb`)."""
+    global _renderer
+    _renderer = renderer
 
 
 def _resolve(scenario: str | Scenario, robot: str | None = None) -> Scenario:
@@ -111,9 +123,9 @@ class PlanningEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode != "rgb_array":
             return None
-        from ..viz.plot2d import render_rgb
-
-        return render_rgb(self.problem, self.robot, self.core.q[0])
+        if _renderer is None:
+            raise RuntimeError("no renderer is installed (importing pointplan installs one): see set_renderer")
+        return _renderer(self.problem, self.robot, self.core.q[0])
 
 
 class PlanningVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.float32], NDArray[Any]]):

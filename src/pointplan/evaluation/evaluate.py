@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..parallel import Interrupted, WorkerPool, backend, wants_workers
 from ..planners.base import path_length
 from ..robots.base import Robot
 from ..robots.motion import intervals
@@ -213,18 +214,22 @@ def evaluate(
     tolerance: float = 0.07,
     workers: int | None = None,
     address: str | None = None,
+    pool: WorkerPool | None = None,
 ) -> EvalReport:
     """Plan every problem with ``planner`` and re-check each returned path.
 
-    With ``workers > 1`` or a Ray cluster ``address`` the problems are planned by Ray
-    workers (:func:`pointplan.distributed.evaluate_parallel`): the same records in the
-    same order, wall times aside."""
-    from ..distributed import wants_ray
-
-    if wants_ray(workers, address):
-        from ..distributed import evaluate_parallel
-
-        return evaluate_parallel(planner, problems, robot, progress, resolution, tolerance, workers, address)  # type: ignore[no-any-return]
+    With a worker ``pool`` (e.g. :class:`pointplan.distributed.RayPool`), or ``workers > 1``
+    or a cluster ``address`` (a pool of the default back end, Ray), the problems are
+    planned by the workers: the same records in the same order, wall times aside."""
+    own = pool is None and wants_workers(workers, address)
+    if own:
+        pool = backend().pool(workers, address)
+    if pool is not None:
+        try:
+            return _evaluate_in(pool, planner, problems, robot, progress, resolution, tolerance)
+        finally:
+            if own:
+                pool.shutdown()
     report = EvalReport(planner=str(getattr(planner, "name", type(planner).__name__)))
     it: Any = problems
     if progress:
@@ -238,11 +243,63 @@ def evaluate(
             n_ok += report.records[-1].success
             if progress:
                 it.set_postfix(success=f"{n_ok / len(report.records):.1%}")
-    except KeyboardInterrupt:  # keep what finished, as the Ray path does
+    except KeyboardInterrupt:  # keep what finished, as the pool path does
         if progress:
             it.close()
         report.interrupted = (len(report.records), len(problems))
         print(f"\ninterrupted: kept the {len(report.records)} of {len(problems)} problems that finished", file=sys.stderr)
+    return report
+
+
+def set_call_number(planner: Any, number: int) -> None:
+    """Make ``planner``'s next ``plan`` call the ``number``-th one (counted from 0), for a
+    planner that numbers its calls in ``calls`` (Bi-RRT seeds each call with
+    ``(seed, call number)``); others are left alone."""
+    if isinstance(getattr(planner, "calls", None), int):
+        planner.calls = int(number)
+
+
+def _plan_and_check_at(
+    pos: int, planner: Any, problems: Sequence[Problem], robot: Robot, first_call: int, resolution: float, tolerance: float
+) -> EpisodeRecord:
+    """Problem ``pos`` of an evaluation, in a worker: what the serial loop does for it."""
+    set_call_number(planner, first_call + pos)
+    return plan_and_check(planner, problems[pos], robot, resolution, tolerance)
+
+
+def _evaluate_in(pool: WorkerPool, planner: Any, problems: Sequence[Problem], robot: Robot, progress: bool, resolution: float, tolerance: float) -> EvalReport:
+    """:func:`evaluate` on ``pool``'s workers. Each worker plans with its own copy of
+    ``planner``, set to the call number a serial run would have; afterwards ``planner``
+    here counts the calls as if it had planned them all. On Ctrl-C the report holds the
+    problems that finished (in problem order) and ``interrupted`` says how many."""
+    report = EvalReport(planner=str(getattr(planner, "name", type(planner).__name__)))
+    n = len(problems)
+    first_call = int(getattr(planner, "calls", 0) or 0)
+    bar = None
+    solved = [0, 0]
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=n, desc=report.planner, unit="problem")
+
+    def tick(_: int, rec: EpisodeRecord) -> None:
+        solved[0] += bool(rec.success)
+        solved[1] += 1
+        if bar is not None:
+            bar.update()
+            bar.set_postfix(success=f"{solved[0] / solved[1]:.1%}")
+
+    try:
+        records = pool.map(_plan_and_check_at, range(n), shared=(planner, problems, robot, first_call, resolution, tolerance), on_result=tick)
+    except Interrupted as stop:
+        records = [stop.results[i] for i in sorted(stop.results)]
+        report.interrupted = (len(records), n)
+        print(f"\ninterrupted: kept the {len(records)} of {n} problems that finished", file=sys.stderr)
+    finally:
+        if bar is not None:
+            bar.close()
+    report.records.extend(records)
+    set_call_number(planner, first_call + n)
     return report
 
 

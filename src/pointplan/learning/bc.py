@@ -23,6 +23,7 @@ from ..models.checkpoint import save_checkpoint, to_dict
 from ..models.encoders import EncoderConfig
 from ..models.inputs import goal_input, obs_input
 from ..observers import make_observer
+from ..parallel import Interrupted, backend, wants_workers
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Problem
@@ -100,18 +101,16 @@ def _single_thread() -> None:
 
 
 def demo_pool(workers: int, address: str | None = None) -> Any:
-    """A pool for :func:`plan_demos`: Ray workers when Ray is installed
-    (:class:`pointplan.distributed.RayPool`; ``address`` joins a cluster), else a process
-    pool; ``None`` for one worker and no address."""
-    from ..distributed import RAY_MISSING, RayPool, ray_available, wants_ray
-
-    if not wants_ray(workers, address):
+    """A pool for :func:`plan_demos`: the default back end's workers when it can run here
+    (Ray, :class:`pointplan.distributed.RayPool`; ``address`` joins a cluster), else a
+    process pool; ``None`` for one worker and no address."""
+    if not wants_workers(workers, address):
         return None
-    if ray_available():
-        return RayPool(workers if workers > 1 else None, address)
+    if backend().available():
+        return backend().pool(workers if workers > 1 else None, address)
     if address:
-        raise RuntimeError(RAY_MISSING)
-    print(f"pointplan: planning in {workers} local processes; {RAY_MISSING.split(' (')[0]} to use Ray", file=sys.stderr)
+        raise RuntimeError("running on several workers needs Ray: pip install 'pointplan[ray]' (or drop --workers/--address to run in one process)")
+    print(f"pointplan: planning in {workers} local processes; running on several workers needs Ray: pip install 'pointplan[ray]' to use Ray", file=sys.stderr)
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
@@ -119,28 +118,29 @@ def demo_pool(workers: int, address: str | None = None) -> Any:
 
 
 def plan_demos(jobs: list[DemoJob], pool: Any = None, progress: bool = True, desc: str = "demonstrations") -> list[tuple[int, np.ndarray]]:
-    """Plan every job (in ``pool`` if given; each job has its own planner seed, so the
+    """Plan every job (in ``pool`` if given: a ``concurrent.futures`` pool or a
+    :class:`~pointplan.parallel.WorkerPool`; each job has its own planner seed, so the
     result does not depend on the workers); returns the solved ones in job order."""
+    from concurrent.futures import Executor
+
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=len(jobs), desc=desc, unit="problem")
     out: list[tuple[int, np.ndarray]] = []
-    from ..distributed import Interrupted, RayPool
-
-    if isinstance(pool, RayPool):
+    if pool is not None and not isinstance(pool, Executor):
         # results come back in job order; Ctrl-C keeps the demonstrations that finished
-        ray_bar = bar
+        live_bar = bar
         bar = None  # advanced as results arrive, not in the loop below
         try:
-            results: Any = pool.map(_plan_demo, jobs, on_result=lambda *_: ray_bar.update() if ray_bar is not None else None)
+            results: Any = pool.map(_plan_demo, jobs, on_result=lambda *_: live_bar.update() if live_bar is not None else None)
         except Interrupted as stop:
             results = [stop.results[i] for i in sorted(stop.results)]
             print(f"\ninterrupted: keeping the {len(results)} of {len(jobs)} demonstrations that finished", file=sys.stderr)
         finally:
-            if ray_bar is not None:
-                ray_bar.close()
+            if live_bar is not None:
+                live_bar.close()
     else:
         results = pool.map(_plan_demo, jobs, chunksize=8) if pool is not None else map(_plan_demo, jobs)
     for index, path in results:
@@ -164,11 +164,13 @@ def generate_demos(
     address: str | None = None,
     attempts: int = 1,
     margin: float = 0.0,
+    pool: Any = None,
 ) -> Demos:
-    """Plan ``n_problems`` training problems with Bi-RRT and cut the paths into steps
-    (``workers`` Ray workers or processes, see :func:`demo_pool`); with ``attempts > 1``
-    each problem is planned that many times and its shortest solution kept (the first
-    attempt is the single-attempt run's, so its problems and solutions are a subset). With
+    """Plan ``n_problems`` training problems with Bi-RRT and cut the paths into steps (in
+    ``pool`` if given, else on ``workers`` Ray workers or processes, see :func:`demo_pool`);
+    with ``attempts > 1`` each problem is planned that many times and its shortest solution
+    kept (the first attempt is the single-attempt run's, so its problems and solutions are a
+    subset). With
     ``margin > 0`` the expert plans for the body grown by ``margin`` (:meth:`Robot.padded`),
     falling back to the body itself where the padded one finds no path."""
     if attempts < 1:
@@ -176,11 +178,13 @@ def generate_demos(
     robot_name = scenario.robot.name if scenario.robot.dim == 3 else None
     index = [_demo_index(seed, n_problems, i) for i in range(n_problems)]
     jobs: list[DemoJob] = [(scenario.name, robot_name, split, k, seed, seed * 7_919 + k, max_nodes, None, attempts, float(margin)) for k in index]
-    pool = demo_pool(workers, address)
+    own = pool is None
+    if own:
+        pool = demo_pool(workers, address)
     try:
         paths = plan_demos(jobs, pool, progress)
     finally:
-        if pool is not None:
+        if own and pool is not None:
             pool.shutdown()
     return demos_from_paths(scenario, split, seed, paths)
 
@@ -339,8 +343,9 @@ class BCConfig:
     expert_margin: float = field(default=0.0, metadata={"min": 0})
 
 
-def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: Demos | None = None) -> dict[str, Any]:
-    """Fit the actor to demonstrations; saves ``run_dir/bc.pt``. Returns a summary."""
+def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: Demos | None = None, pool: Any = None) -> dict[str, Any]:
+    """Fit the actor to demonstrations; saves ``run_dir/bc.pt``. Returns a summary. ``pool``:
+    where to plan the demonstrations (see :func:`generate_demos`)."""
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     scenario = make_scenario(cfg.env, robot=cfg.robot)
@@ -363,6 +368,7 @@ def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: D
             address=cfg.address,
             attempts=cfg.expert_attempts,
             margin=cfg.expert_margin,
+            pool=pool,
         )
         if cfg.demos_file:
             save_demos(cfg.demos_file, scenario, demos, "train", cfg.seed)

@@ -102,7 +102,7 @@ class _Log:
 
 
 def _validate(policy: Policy, scenario: Scenario, env: EnvConfig, problems: list[Any], seed: int) -> tuple[float, float]:
-    from ..planners.policy import rollout_batch
+    from ..planners.rollout import rollout_batch
 
     res = rollout_batch(policy, scenario.robot, env, problems, scenario.horizon, seed=seed)
     return float(np.mean([r.success for r in res])), float(np.mean([r.nodes for r in res]))
@@ -144,9 +144,9 @@ def _threading_labels(
     return out
 
 
-def first_demos(cfg: DaggerConfig, scenario: Scenario, demos_path: Path, progress: bool) -> Demos:
+def first_demos(cfg: DaggerConfig, scenario: Scenario, demos_path: Path, progress: bool, pool: Any = None) -> Demos:
     """The cloning demonstrations (from ``cfg.bc.demos_file`` when it exists, else planned by
-    ``cfg.expert``), also written to ``demos_path``."""
+    ``cfg.expert``, Bi-RRT on ``pool`` if given), also written to ``demos_path``."""
     b = cfg.bc
     source = b.demos_file if b.demos_file and Path(b.demos_file).exists() else None
     if source:
@@ -158,7 +158,7 @@ def first_demos(cfg: DaggerConfig, scenario: Scenario, demos_path: Path, progres
         paths = _threading_labels(scenario, jobs, progress, "demonstrations", copies=cfg.expert == "slot-threading-copies")
         demos = demos_from_paths(scenario, "train", b.seed, paths)
     else:
-        demos = generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address)
+        demos = generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address, pool=pool)
     save_demos(demos_path, scenario, demos, "train", b.seed)
     return demos
 
@@ -176,7 +176,7 @@ def _roll_out_and_label(
 ) -> tuple[list[Any], list[Any]]:
     """Round ``rnd``'s rollouts of the policy on fresh training problems, and the expert's
     paths from states of the failed ones."""
-    from ..planners.policy import rollout_batch
+    from ..planners.rollout import rollout_batch
 
     b = cfg.bc
     probs = [scenario.problem("train", _rollout_index(b.seed, rnd, cfg.rollouts, i), seed=b.seed) for i in range(cfg.rollouts)]
@@ -197,11 +197,12 @@ def _print_round(row: dict[str, Any], best: float) -> None:
 
 
 def train_dagger(
-    cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, init_actor: str | None = None, resume: str | Path | None = None
+    cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, init_actor: str | None = None, resume: str | Path | None = None, pool: Any = None
 ) -> dict[str, Any]:
     """Behavioural cloning (from ``init_actor`` if given, else fitted here), then
     ``cfg.rounds`` DAgger rounds; checkpoints ``best.pt`` and ``last.pt`` (resumable) and
-    ``metrics.csv`` in ``run_dir``, the aggregated demonstrations in ``demos.npz``."""
+    ``metrics.csv`` in ``run_dir``, the aggregated demonstrations in ``demos.npz``. The
+    Bi-RRT expert plans on ``pool`` if given (else see :func:`~.bc.demo_pool`)."""
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     b = cfg.bc
@@ -221,7 +222,7 @@ def train_dagger(
         env_steps = int(d["env_steps"])
         demos = load_demos(demos_path, scenario)
     else:
-        demos = first_demos(cfg, scenario, demos_path, progress)
+        demos = first_demos(cfg, scenario, demos_path, progress, pool)
         if init_actor:
             actor.load_state_dict(load_checkpoint(init_actor, b.device)["actor"])
         else:
@@ -229,7 +230,9 @@ def train_dagger(
     policy = Policy(actor, robot, {"observation": b.observation, "n_points": b.n_points}, b.device)
     val_problems = scenario.problems("val", cfg.eval_episodes, seed=b.seed)
     log = _Log(run_dir / "metrics.csv")
-    pool = demo_pool(b.workers, b.address)
+    own = pool is None
+    if own:
+        pool = demo_pool(b.workers, b.address)
     t0 = time.perf_counter()
     try:
         for rnd in range(start_round, cfg.rounds):
@@ -270,6 +273,6 @@ def train_dagger(
             if progress:
                 _print_round(row, best)
     finally:
-        if pool is not None:
+        if own and pool is not None:
             pool.shutdown(cancel_futures=True)
     return {"run_dir": str(run_dir), "best_success": best, "demo_steps": len(demos), "wall_time_s": wall_before + time.perf_counter() - t0}

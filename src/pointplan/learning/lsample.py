@@ -207,18 +207,19 @@ def plan_validation(checkpoint: Path, scenario: Scenario, n: int, seed: int, lam
     return out
 
 
-def _demos(scenario: Scenario, cfg: LSampleConfig, split: str, n: int, file: str | None, progress: bool) -> Demos:
+def _demos(scenario: Scenario, cfg: LSampleConfig, split: str, n: int, file: str | None, progress: bool, pool: Any = None) -> Demos:
     if file and Path(file).exists():
         return load_demos(file, scenario)
-    demos = generate_demos(scenario, n, cfg.seed, cfg.max_nodes, progress=progress, split=split, workers=cfg.workers)
+    demos = generate_demos(scenario, n, cfg.seed, cfg.max_nodes, progress=progress, split=split, workers=cfg.workers, pool=pool)
     if file:
         save_demos(file, scenario, demos, split, cfg.seed)
     return demos
 
 
-def train_lsample(cfg: LSampleConfig, run_dir: str | Path, progress: bool = True) -> dict[str, Any]:
-    """Plan the data (or load it), fit the CVAE, select the epoch on validation problems;
-    writes ``best.pt``, ``last.pt``, ``metrics.csv`` to ``run_dir``. Returns a summary."""
+def train_lsample(cfg: LSampleConfig, run_dir: str | Path, progress: bool = True, pool: Any = None) -> dict[str, Any]:
+    """Plan the data (or load it; Bi-RRT on ``pool`` if given), fit the CVAE, select the
+    epoch on validation problems; writes ``best.pt``, ``last.pt``, ``metrics.csv`` to
+    ``run_dir``. Returns a summary."""
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
@@ -228,8 +229,8 @@ def train_lsample(cfg: LSampleConfig, run_dir: str | Path, progress: bool = True
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     t0 = time.perf_counter()
-    train_demos = _demos(scenario, cfg, "train", cfg.n_problems, cfg.demos, progress)
-    val_demos = _demos(scenario, cfg, "val", cfg.val_problems, cfg.val_demos, progress)
+    train_demos = _demos(scenario, cfg, "train", cfg.n_problems, cfg.demos, progress, pool)
+    val_demos = _demos(scenario, cfg, "val", cfg.val_problems, cfg.val_demos, progress, pool)
     t_data = time.perf_counter() - t0
     train = path_set(train_demos, robot, low, high, cfg.path_spacing)
     val = path_set(val_demos, robot, low, high, cfg.path_spacing)

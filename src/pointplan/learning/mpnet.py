@@ -219,13 +219,13 @@ def validation_loss(model: MPNetModel, ps: PathSet, center: np.ndarray, step: fl
     return total / max(n, 1)
 
 
-def _demos(scenario: Scenario, n: int, split: str, path: str | None, cfg: MPNetTrainConfig, progress: bool) -> Demos:
+def _demos(scenario: Scenario, n: int, split: str, path: str | None, cfg: MPNetTrainConfig, progress: bool, pool: Any = None) -> Demos:
     if path and Path(path).exists():
         with np.load(path, allow_pickle=False) as f:
             if str(f["split"]) != split:
                 raise ValueError(f"{path}: demonstrations of the {f['split']} split, not {split}")
         return load_demos(path, scenario)
-    demos = generate_demos(scenario, n, cfg.seed, progress=progress, split=split, workers=cfg.workers)
+    demos = generate_demos(scenario, n, cfg.seed, progress=progress, split=split, workers=cfg.workers, pool=pool)
     if path:
         save_demos(path, scenario, demos, split, cfg.seed)
     return demos
@@ -245,9 +245,10 @@ class MPNetTrainResult:
     summary: dict[str, Any] = field(default_factory=dict)
 
 
-def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = True) -> MPNetTrainResult:
+def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = True, pool: Any = None) -> MPNetTrainResult:
     """Train on the training split, select on the validation split, test once. Writes
-    ``best.pt``, ``last.pt``, ``metrics.csv`` and ``summary.json`` to ``run_dir``."""
+    ``best.pt``, ``last.pt``, ``metrics.csv`` and ``summary.json`` to ``run_dir``. The
+    demonstrations are planned on ``pool`` if given (see :func:`~.bc.generate_demos`)."""
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(cfg.seed)
@@ -262,8 +263,8 @@ def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = Tru
     step = float(robot.action_scale[0])
 
     t0 = time.perf_counter()
-    train_demos = _demos(scenario, cfg.n_problems, "train", cfg.demos_file, cfg, progress)
-    val_demos = _demos(scenario, cfg.val_demo_problems, "val", cfg.val_demos_file, cfg, progress)
+    train_demos = _demos(scenario, cfg.n_problems, "train", cfg.demos_file, cfg, progress, pool)
+    val_demos = _demos(scenario, cfg.val_demo_problems, "val", cfg.val_demos_file, cfg, progress, pool)
     train_set = make_path_set(train_demos, robot, center, step, cfg.waypoint_step, observation, n_points)
     val_set = make_path_set(val_demos, robot, center, step, cfg.waypoint_step, observation, n_points)
     val_problems = scenario.problems("val", cfg.val_problems, seed=cfg.seed)

@@ -28,6 +28,7 @@ from ..envs.core import BatchedCore, EnvConfig
 from ..models.actor_critic import NetConfig
 from ..models.checkpoint import CheckpointError, load_checkpoint, save_checkpoint, to_dict
 from ..models.encoders import EncoderConfig
+from ..parallel import RolloutSource, backend, wants_workers
 from ..scenes.scenarios import make_scenario
 from ..scenes.scene import Problem
 from .curriculum import EpisodeSource, FailurePool
@@ -163,22 +164,22 @@ def train(
     workers: int | None = None,
     address: str | None = None,
     sync_every: int | None = None,
+    rollouts: Callable[[TrainConfig], RolloutSource] | None = None,
 ) -> TrainResult:
     """Train a policy with SAC + HER; returns where the checkpoints are and the history.
 
-    With ``workers > 1`` or a Ray cluster ``address``, Ray rollout workers step the
-    ``num_envs`` environments (shared out among them) and this process learns from the
-    episodes they send, broadcasting the actor every ``sync_every`` updates
-    (``pointplan.distributed.rollouts``)."""
-    from ..distributed import wants_ray
-
+    With ``rollouts`` (a factory of rollout sources, e.g.
+    ``pointplan.distributed.rollouts.ray_rollouts(workers, address)``), or ``workers > 1`` or
+    a Ray cluster ``address`` (the default back end's rollout workers, which broadcast the
+    actor every ``sync_every`` updates), the ``num_envs`` environments are stepped elsewhere
+    and this process learns from the episodes they send."""
+    if rollouts is None and wants_workers(workers, address):
+        rollouts = backend().rollouts(workers, address, sync_every)
     remote = None
-    if wants_ray(workers, address):
+    if rollouts is not None:
         if cfg.retry_failures > 0:
             raise ValueError("--retry-failures runs in one process for now: drop --workers/--address to use it")
-        from ..distributed.rollouts import SYNC_EVERY, RayRollouts
-
-        remote = RayRollouts(cfg, workers, address, sync_every or SYNC_EVERY)
+        remote = rollouts(cfg)
     try:
         res = _train(cfg, run_dir, progress, resume, on_eval, remote)
         res.interrupted = res.interrupted or bool(remote is not None and remote.interrupted)
@@ -378,8 +379,8 @@ def _collect(run: _Run) -> int:
     return e
 
 
-def _collect_remote(run: _Run, remote: Any) -> int:
-    """Episodes from the Ray rollout workers (which step the environments)."""
+def _collect_remote(run: _Run, remote: RolloutSource) -> int:
+    """Episodes from the rollout workers (which step the environments)."""
     remote.sync(run.agent.actor, run.agent.updates)
     episodes, succ, collected = remote.next_chunk(random_actions=run.warming_up)
     for episode in episodes:
@@ -402,7 +403,7 @@ def _learn(run: _Run, collected: int) -> None:
 
 def _rollouts(run: _Run, problems: list[Problem], averaged: bool, seed: int) -> list[Any]:
     """The deterministic policy on ``problems``."""
-    from ..planners.policy import rollout_batch
+    from ..planners.rollout import rollout_batch
 
     agent = run.agent
     return rollout_batch(

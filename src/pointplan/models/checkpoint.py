@@ -100,7 +100,7 @@ def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> None:
     dataclasses with ``to_dict``, numpy scalars with ``.item()`` and numpy arrays with
     ``torch.from_numpy``.
     """
-    from .. import __version__
+    from .._version import __version__
 
     clash = [k for k in HEADER_KEYS if k in payload]
     if clash:

@@ -647,9 +647,11 @@ class RolloutEngine:
         compiled = self.compiled() if not sampled else None
         st, t_compiled = None, None
         if compiled is not None:
-            res, st, t_compiled = compiled.rollout(problem, t0)
+            res, handover, t_compiled = compiled.rollout(problem, t0)
             if res is not None:
                 return res
+            if handover is not None:
+                st = _State.resumed(handover[0], np.asarray(problem.goal, np.float64), self.horizon, opts.greedy_goal, handover[1])
         sp = _OneRobot(self, problem, nrng, sampled)
         if st is None:
             st = _State(np.asarray(problem.start, np.float64)[None].copy(), sp.goal[None].copy(), self.horizon, np.array([opts.greedy_goal]))

@@ -17,7 +17,7 @@ table.
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -27,8 +27,22 @@ from ..scenes.scene import Problem, Scene
 from . import _policy_kernels as K
 from .base import PlanResult
 
-if TYPE_CHECKING:
-    from .rollout import RolloutEngine, _State
+
+class EngineView(Protocol):
+    """What the compiled rollout reads of its rollout engine."""
+
+    fast: Any
+    robot: Any
+    env: Any
+    options: Any
+    escape: Any
+    horizon: int
+
+    @property
+    def observer(self) -> Any: ...
+
+    def _uniforms(self, k: int) -> np.ndarray: ...
+
 
 _F64 = np.dtype(np.float64)
 #: ``info["end"]`` of the compiled rollout's end codes (``_policy_kernels.END_*``)
@@ -38,7 +52,7 @@ END_NAMES = ("horizon", "stalled", "goal", "goal", "near-goal", "near-goal", "es
 class CompiledBall:
     """The compiled rollout of one engine (see the module's docstring); made by :meth:`build`."""
 
-    def __init__(self, engine: RolloutEngine, weights: tuple[np.ndarray, np.ndarray], scale: np.ndarray, fparams: np.ndarray, iparams: np.ndarray) -> None:
+    def __init__(self, engine: EngineView, weights: tuple[np.ndarray, np.ndarray], scale: np.ndarray, fparams: np.ndarray, iparams: np.ndarray) -> None:
         self.engine = engine
         self.args = (*weights, scale, fparams, iparams)
         self._scene: Scene | None = None
@@ -47,7 +61,7 @@ class CompiledBall:
         self._end_entries = self._end_table()
 
     @classmethod
-    def build(cls, engine: RolloutEngine) -> CompiledBall | None:
+    def build(cls, engine: EngineView) -> CompiledBall | None:
         """The compiled rollout of ``engine``, or ``None`` where it does not apply (not a
         ball, not a PointNet in numpy, hidden layers of another width)."""
         fast, robot, env, opts, esc = engine.fast, engine.robot, engine.env, engine.options, engine.escape
@@ -79,12 +93,10 @@ class CompiledBall:
         ]
         return cls(engine, K.pack_weights(fast.inp, fast.hidden, fast.head), np.ascontiguousarray(robot.action_scale, np.float64), fparams, iparams)
 
-    def rollout(self, problem: Problem, t0: float) -> tuple[PlanResult | None, _State | None, float | None]:
-        """``(result, None, None)``: the whole rollout; ``(None, state, seconds)``: it stopped
-        where an escape starts, and the step loop goes on from ``state``; ``(None, None,
-        None)``: the scene is not boxes only (or has no points)."""
-        from .rollout import _State
-
+    def rollout(self, problem: Problem, t0: float) -> tuple[PlanResult | None, tuple[np.ndarray, int] | None, float | None]:
+        """``(result, None, None)``: the whole rollout; ``(None, (path, checks), seconds)``:
+        it stopped where an escape starts, and the step loop goes on from there; ``(None,
+        None, None)``: the scene is not boxes only (or has no points)."""
         scene = problem.scene
         if scene is not self._scene:
             self._scene_args = self._scene_inputs(scene)
@@ -100,8 +112,7 @@ class CompiledBall:
         end, rows, checks, _ = K._rollout(start, goal, *args, path)  # type: ignore[call-arg]
         t2 = time.perf_counter()
         if end == K.END_ESCAPE:
-            eng = self.engine
-            return None, _State.resumed(path[:rows].copy(), goal, eng.horizon, eng.options.greedy_goal, checks), t2 - t1
+            return None, (path[:rows].copy(), int(checks)), t2 - t1
         success, to_goal, entries = self._end_entries[end]
         steps = rows - 1 - to_goal
         info = {"time_split": {"observe": 0.0, "network": 0.0, "motion": 0.0, "goal": 0.0, "compiled": t2 - t1, "steps": steps}, **entries}

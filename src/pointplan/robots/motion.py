@@ -20,18 +20,33 @@ first sub-step (a second, small query for those motions only).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from ..geometry.collision import CollisionWorld
-    from .base import Robot
 
 Array = NDArray[np.float64]
 Bool = NDArray[np.bool_]
 Int = NDArray[np.int64]
+
+
+class Robot(Protocol):
+    """What the checks use of a :class:`pointplan.robots.base.Robot` (which imports this
+    module, so it is not imported here)."""
+
+    def grown_parts(self, seg: Array, reach: float) -> tuple[Array, Array]: ...
+
+    def collides(self, world: CollisionWorld, q: Array, radii: Array | None = None, halfs: Array | None = None) -> Bool: ...
+
+    def integrate(self, q: Array, v: Array) -> Array: ...
+
+    def positions(self, q: Array) -> Array: ...
+
+    def log(self, q0: Array, q1: Array) -> Array: ...
+
 
 #: every checked body is grown by this much more: an accepted motion keeps at least this
 #: clearance (the evaluator calls a clearance below 1e-6 a contact)

@@ -27,8 +27,8 @@ import numpy as np
 
 from ..robots import Disc2D
 from ..robots.base import Robot
+from .base import Scenario
 from .narrow2d import SPLIT_KEYS, _boxes_from_intervals, free_space_labels
-from .scenarios import Scenario
 from .scene import Scene
 
 VARIANT_KEYS = {"ends": 0xE4D5, "many": 0x3A41, "narrow": 0x4A77, "manynarrow": 0x3A4A}
@@ -155,7 +155,7 @@ class Narrow2DManyNarrow(Narrow2DVariantScenario):
     variant = "manynarrow"
 
 
-#: registry keys (as :func:`pointplan.scenes.scenarios.scenario_key` spells ``narrow2d-ends``)
+#: registry keys (as :func:`pointplan.scenes.registry.scenario_key` spells ``narrow2d-ends``)
 VARIANT_SCENARIOS: dict[str, type[Scenario]] = {
     "narrow2dends": Narrow2DEnds,
     "narrow2dmany": Narrow2DMany,

@@ -22,8 +22,8 @@ from ..geometry.shapes import Box, Capsule, Cone, Cylinder, Shape, Sphere
 from ..robots import make_robot
 from ..robots.base import Robot
 from ..robots.sshape import BAR_THICKNESS
+from .base import Scenario
 from .narrow2d import SPLIT_KEYS
-from .scenarios import Scenario
 from .scene import DynamicScene, Scene
 
 Array = np.ndarray

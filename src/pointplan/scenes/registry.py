@@ -1,0 +1,50 @@
+"""The scenarios by name: :func:`make_scenario` and the names it knows.
+
+It imports every scenario module and none of them imports it.
+"""
+
+from __future__ import annotations
+
+from ..robots.base import Robot
+from .base import Scenario
+from .narrow2d_variants import VARIANT_SCENARIOS
+from .scenes2d import Empty2DScenario, Narrow2DScenario
+from .scenes3d import SCENARIOS_3D
+
+#: the 2D scenarios: 2D-Narrow, its variants (narrow2d-ends, -many, -narrow, -manynarrow), the empty square
+SCENARIOS: dict[str, type[Scenario]] = {"narrow2d": Narrow2DScenario, "empty2d": Empty2DScenario, **VARIANT_SCENARIOS}
+
+
+def scenario_names() -> list[str]:
+    """Every name :func:`make_scenario` knows."""
+    return list(SCENARIOS) + list(SCENARIOS_3D)
+
+
+def scenario_key(name: str) -> str:
+    """The registry key of a scenario name or Gymnasium id (``pointplan/Boxes3D-v0`` ->
+    ``boxes3d``)."""
+    return name.lower().split("/")[-1].removesuffix("-v0").replace("-", "").replace("_", "")
+
+
+def is_3d(name: str) -> bool:
+    """Whether ``name`` is one of the 3D scenarios."""
+    return scenario_key(name) in SCENARIOS_3D
+
+
+def make_scenario(name: str, robot: str | Robot | None = None, **kwargs: object) -> Scenario:
+    """A scenario by name: ``narrow2d``, ``empty2d`` (2D disc); ``boxes3d``, ``synthetic3d``,
+    ``ycb3d``, ``dynamic3d``, ``slot``, ``qureshi3d`` (``robot``: ``sphere3d`` or ``sshape``).
+    Also accepts Gymnasium ids such as ``pointplan/Boxes3D-v0``."""
+    key = scenario_key(name)
+    if key in SCENARIOS_3D:
+        return SCENARIOS_3D[key](robot=robot, **kwargs)
+    if key in SCENARIOS:
+        if robot is not None:
+            from ..robots import make_robot
+
+            r = make_robot(robot) if isinstance(robot, str) else robot
+            if r.dim != 2:
+                raise ValueError(f"{name} is a 2D scenario; robot {r.name} is {r.dim}D")
+            return SCENARIOS[key](robot=r, **kwargs)  # type: ignore[call-arg]
+        return SCENARIOS[key](**kwargs)
+    raise ValueError(f"unknown environment {name!r}; known: {', '.join(scenario_names())}")
