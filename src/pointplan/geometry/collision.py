@@ -163,6 +163,8 @@ class CollisionWorld:
     con_half: Array = field(default_factory=lambda: np.zeros(0))
     #: per scene: point clouds (merged) as a KD-tree, or None
     cloud_trees: list[cKDTree | None] = field(default_factory=list)
+    #: per scene: the normals of the tree's points (in its order), or None
+    cloud_normals: list[Array | None] = field(default_factory=list)
     #: per scene: coal collision objects of meshes
     coal_objects: list[list[tuple[Any, Any]]] = field(default_factory=list)
     #: per scene: shapes kept for the coal fallback (capsules, cylinders, cones)
@@ -199,9 +201,10 @@ class CollisionWorld:
         def arr(xs: list[Array], shape: tuple[int, ...]) -> Array:
             return np.stack(xs).astype(np.float64) if xs else np.zeros((0,) + shape)
 
-        tree = None
+        tree, normals = None, None
         if clouds:
             tree = cKDTree(np.concatenate([c.points for c in clouds]))
+            normals = np.concatenate([c.normals for c in clouds])
         coal_objs = [_coal_mesh(m) for m in meshes]
         return cls(
             dim=d,
@@ -222,6 +225,7 @@ class CollisionWorld:
             con_rad=np.array([c.radius for c in cones], dtype=np.float64),
             con_half=np.array([c.length / 2 for c in cones], dtype=np.float64),
             cloud_trees=[tree],
+            cloud_normals=[normals],
             coal_objects=[coal_objs],
             shapes=[coal_shapes],
             coal_items=[
@@ -269,6 +273,7 @@ class CollisionWorld:
             con_rad=pad("con_rad", np.zeros(())),
             con_half=pad("con_half", np.zeros(())),
             cloud_trees=[w.cloud_trees[0] for w in worlds],
+            cloud_normals=[w.cloud_normals[0] if w.cloud_normals else None for w in worlds],
             coal_objects=[w.coal_objects[0] for w in worlds],
             shapes=[w.shapes[0] for w in worlds],
             coal_items=[w.coal_items[0] for w in worlds],

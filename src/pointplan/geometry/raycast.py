@@ -37,7 +37,12 @@ Conventions
 * Normals are unit outward surface normals at the hit, flipped where needed so that
   ``dot(normal, direction) <= 0``. On box edges and cylinder/cone rims the normal is that
   of the face the ray enters through.
-* Point clouds of the world (``cloud_trees``) are ignored: they have no surface to hit.
+* Point clouds of the world (``cloud_trees``) are surfaces sampled by points: each point
+  stands for a small sphere (its radius :data:`SPLAT_FACTOR` times the cloud's median
+  nearest-neighbour spacing, so that a ray does not slip between the points of a sampled
+  surface), and a ray hits the
+  first such sphere it enters, with that point's normal (:func:`_cloud_hits`). A ray has
+  no inside of a cloud to start in.
 * Degenerate primitives (zero-size boxes, zero radius or length) are ignored; this is also
   how the padding of stacked worlds (far away, zero size) drops out.
 * Only 3D worlds are supported (``ValueError`` otherwise).
@@ -50,8 +55,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from ._kernels import ray_box_compiled
 from .collision import CollisionWorld
@@ -435,6 +442,7 @@ def cast_rays(world: CollisionWorld, origins: Array, directions: Array, max_rang
     o2, d2 = o.reshape(nb, n_rays, 3), d.reshape(nb, n_rays, 3)
     best, inside, normal = _primitive_hits(world, o2, d2)
     _mesh_hits(world, o2, d2, best, inside, normal)
+    _cloud_hits(world, o2, d2, best, inside, normal, max_range)
     hit = np.isfinite(best) & (best <= max_range)
     inside &= hit
     normal[inside] = -d2[inside]
@@ -538,4 +546,81 @@ def _mesh_hits(world: CollisionWorld, o2: Array, d2: Array, best: Array, inside:
         normal[b, r_idx] = n
 
 
-__all__ = ["RayHits", "cast_rays"]
+#: a cloud point stands for a sphere this many median nearest-neighbour spacings wide:
+#: measured on 20,000 area-weighted random points on two boxes, 2,000 rays (/tmp-free
+#: reproduction in tests/test_raycast.py): at 1.5 spacings 2% of the rays slip through the
+#: holes of a random sampling, at 2.5 none, with hit distances within 9 mm of the boxes'
+#: and every normal the box face's
+SPLAT_FACTOR = 2.5
+
+
+def cloud_splat_radius(tree: cKDTree) -> float:
+    """The radius of the sphere each point of a cloud stands for when rays are cast:
+    :data:`SPLAT_FACTOR` times the median distance to the nearest other point."""
+    if tree.n < 2:
+        return 1e-3
+    dist, _ = tree.query(tree.data, k=2)
+    return float(np.median(dist[:, 1])) * SPLAT_FACTOR
+
+
+def _splat_radius(world: CollisionWorld, b: int, tree: cKDTree) -> float:
+    """:func:`cloud_splat_radius` of scene ``b``'s cloud, computed once per world."""
+    cache = world.__dict__.setdefault("_splat_radii", {})
+    if b not in cache:
+        cache[b] = cloud_splat_radius(tree)
+    return float(cache[b])
+
+
+@numba.njit(cache=True, nogil=True)
+def _first_cloud_hits(o, d, pts, radius, best, which):  # type: ignore[no-untyped-def]
+    """For each ray ``(o[i], d[i])`` (unit ``d``), the entry distance into the nearest of
+    the spheres of ``radius`` around ``pts`` closer than ``best[i]``: updates ``best`` and
+    ``which`` (the point's index) in place."""
+    r2 = radius * radius
+    for i in range(o.shape[0]):
+        bi = best[i]
+        for k in range(pts.shape[0]):
+            px, py, pz = pts[k, 0] - o[i, 0], pts[k, 1] - o[i, 1], pts[k, 2] - o[i, 2]
+            t = px * d[i, 0] + py * d[i, 1] + pz * d[i, 2]
+            if t + radius < 0.0 or t - radius >= bi:
+                continue
+            q2 = px * px + py * py + pz * pz - t * t
+            if q2 > r2:
+                continue
+            te = t - np.sqrt(r2 - q2)
+            if te < 0.0:
+                te = 0.0
+            if te < bi:
+                bi = te
+                which[i] = k
+        best[i] = bi
+
+
+def _cloud_hits(world: CollisionWorld, o2: Array, d2: Array, best: Array, inside: NDArray[np.bool_], normal: Array, max_range: float) -> None:
+    """Bring ``best``, ``inside`` and ``normal`` up to date with the scenes' point clouds
+    (see the module docstring): only the points within reach of the rays are tried (one
+    k-d tree query per scene)."""
+    for b in range(o2.shape[0]):
+        tree = world.cloud_trees[b] if b < len(world.cloud_trees) else None
+        if tree is None or not tree.n or not o2.shape[1]:
+            continue
+        radius = _splat_radius(world, b, tree)
+        centre = o2[b].mean(0)
+        spread = float(np.sqrt(np.max(np.sum((o2[b] - centre) ** 2, -1))))
+        reach = spread + max_range + radius
+        cand = np.asarray(tree.query_ball_point(centre, reach), np.int64) if np.isfinite(reach) else np.arange(tree.n)
+        if not len(cand):
+            continue
+        nb = best[b].copy()
+        which = np.full(o2.shape[1], -1, np.int64)
+        _first_cloud_hits(np.ascontiguousarray(o2[b]), np.ascontiguousarray(d2[b]), np.ascontiguousarray(tree.data[cand]), radius, nb, which)
+        got = which >= 0
+        if not got.any():
+            continue
+        best[b, got] = nb[got]
+        inside[b, got] = False
+        nrm = world.cloud_normals[b] if b < len(world.cloud_normals) else None
+        normal[b, got] = nrm[cand[which[got]]] if nrm is not None else np.nan
+
+
+__all__ = ["RayHits", "cast_rays", "cloud_splat_radius"]
