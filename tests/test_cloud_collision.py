@@ -11,8 +11,8 @@ from pointplan.geometry.collision import CollisionWorld, _sub_boxes, boxes_conta
 from pointplan.geometry.shapes import PointCloud
 
 
-def _brute(pts: np.ndarray, c: np.ndarray, rot: np.ndarray, h: np.ndarray) -> np.ndarray:
-    return np.any(sphere_box_sqdist(pts, c, rot, h) <= 0.0, 0)
+def _brute(pts: np.ndarray, c: np.ndarray, rot: np.ndarray, h: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    return np.any(sphere_box_sqdist(pts, c, rot, h) <= margin * margin, 0)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -28,10 +28,11 @@ def test_tree_query_is_the_brute_force_answer_3d(seed: int) -> None:
     k = rng.integers(0, m, 50)
     face = np.einsum("kij,kj->ki", rot[k], h[k] * rng.choice([-1.0, 1.0], (50, 3)))
     pts = np.concatenate([pts, c[k] + face])
-    expect = _brute(pts, c, rot, h)
-    got = boxes_contain_cloud_points(cKDTree(pts), c, rot, h)
-    assert 0 < expect.sum() < m
-    np.testing.assert_array_equal(got, expect)
+    for margin in (0.0, 0.004):
+        expect = _brute(pts, c, rot, h, margin)
+        got = boxes_contain_cloud_points(cKDTree(pts), c, rot, h, margin)
+        assert 0 < expect.sum() < m
+        np.testing.assert_array_equal(got, expect)
 
 
 def test_tree_query_2d_and_batch_shapes() -> None:
@@ -62,10 +63,20 @@ def test_sub_boxes_cover_their_box() -> None:
 
 
 def test_collision_world_with_a_cloud_uses_it() -> None:
+    """Each cloud point is a sphere of the cloud's point radius, for boxes and spheres."""
     rng = np.random.default_rng(1)
     pts = rng.uniform(0, 1, (2000, 3))
-    world = CollisionWorld.from_shapes([PointCloud(pts, np.zeros_like(pts))], 3)
+    cloud = PointCloud(pts, np.zeros_like(pts))
+    r = cloud.point_radius()
+    assert 0 < r < 0.2
+    world = CollisionWorld.from_shapes([cloud], 3)
     c = rng.uniform(0, 1, (100, 3))
     rot = Rotation.random(100, random_state=1).as_matrix()
-    h = np.full((100, 3), 0.03)
-    np.testing.assert_array_equal(world.boxes_collide(c, rot, h), _brute(pts, c, rot, h))
+    h = np.full((100, 3), 0.02)
+    hit = world.boxes_collide(c, rot, h)
+    np.testing.assert_array_equal(hit, _brute(pts, c, rot, h, r))
+    assert hit.sum() > _brute(pts, c, rot, h).sum()  # the radius counts
+    balls = world.spheres_collide(c, 0.01)
+    np.testing.assert_array_equal(balls, np.min(np.linalg.norm(c[:, None] - pts[None], axis=-1), 1) <= 0.01 + r)
+    fixed = CollisionWorld.from_shapes([PointCloud(pts, np.zeros_like(pts), radius=0.0)], 3)
+    np.testing.assert_array_equal(fixed.boxes_collide(c, rot, h), _brute(pts, c, rot, h))

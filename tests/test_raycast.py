@@ -537,7 +537,6 @@ def test_a_scanned_surface_is_seen_like_the_surface() -> None:
     scan gives them) hit where they hit the boxes themselves (the closed-form slab test),
     within the splat radius, with the face's normal; the rays that miss the boxes miss
     the cloud (but for grazing rays that the splats' thickness catches)."""
-    from pointplan.geometry.raycast import SPLAT_FACTOR, cloud_splat_radius
     from pointplan.geometry.sampling import area_weighted_points
 
     rng = np.random.default_rng(0)
@@ -547,8 +546,8 @@ def test_a_scanned_surface_is_seen_like_the_surface() -> None:
     o = np.tile([[0.5, 0.15, 0.45]], (2000, 1))
     d = unit(rng.normal(size=(2000, 3)))
     hb, hc = cast_rays(wb, o, d, 2.0), cast_rays(wc, o, d, 2.0)
-    radius = cloud_splat_radius(wc.cloud_trees[0])
-    assert SPLAT_FACTOR * 1e-3 < radius < 0.02
+    radius = wc.cloud_radius[0]
+    assert radius == PointCloud(pts, nrm).point_radius() and 1e-3 < radius < 0.02
     assert hb.hit.sum() > 150 and (hb.hit == hc.hit).mean() > 0.99
     both = hb.hit & hc.hit
     assert both.sum() >= hb.hit.sum() - 2

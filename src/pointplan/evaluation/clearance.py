@@ -122,8 +122,10 @@ class Clearance:
         coal = _coal()
         self.robot = robot
         self.items = [_obstacle(s) for s in obstacles if not isinstance(s, PointCloud)]
-        clouds = [np.asarray(s.points, np.float64) for s in obstacles if isinstance(s, PointCloud)]
-        self.points = np.concatenate(clouds) if clouds else np.zeros((0, robot.dim))
+        clouds = [s for s in obstacles if isinstance(s, PointCloud)]
+        self.points = np.concatenate([np.asarray(s.points, np.float64) for s in clouds]) if clouds else np.zeros((0, robot.dim))
+        # each cloud point stands for a sphere of its cloud's point radius
+        self.point_r = np.concatenate([np.full(len(s.points), s.point_radius()) for s in clouds]) if clouds else np.zeros(0)
         p = robot.parts
         halfs = [h if len(h) == 3 else np.array([*h, _TALL / 2]) for h in p.box_halfs]
         self.geoms = [coal.Sphere(float(r)) for r in p.sphere_radii] + [coal.Box(*(2 * h)) for h in halfs]
@@ -154,7 +156,8 @@ class Clearance:
         return best
 
     def _cloud_distance(self, centers: Array, rots: Array) -> float:
-        """Distance from the point clouds to the parts, in closed form."""
+        """Distance from the point clouds (each point a sphere of its cloud's point radius)
+        to the parts, in closed form."""
         p = self.robot.parts
         pts = _to3(self.points)
         best = math.inf
@@ -168,7 +171,7 @@ class Clearance:
                     h[2] = _TALL / 2
                 out = np.maximum(np.abs(local) - h, 0.0)
                 d = np.where(np.any(out > 0, -1), np.linalg.norm(out, axis=-1), -np.min(h - np.abs(local), -1))
-            best = min(best, float(d.min()))
+            best = min(best, float((d - self.point_r).min()))
         return best
 
     def buried(self, q: Array) -> bool:

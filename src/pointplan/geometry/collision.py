@@ -165,6 +165,8 @@ class CollisionWorld:
     cloud_trees: list[cKDTree | None] = field(default_factory=list)
     #: per scene: the normals of the tree's points (in its order), or None
     cloud_normals: list[Array | None] = field(default_factory=list)
+    #: per scene: the radius of the sphere each cloud point stands for (``PointCloud.point_radius``)
+    cloud_radius: list[float] = field(default_factory=list)
     #: per scene: coal collision objects of meshes
     coal_objects: list[list[tuple[Any, Any]]] = field(default_factory=list)
     #: per scene: shapes kept for the coal fallback (capsules, cylinders, cones)
@@ -201,10 +203,11 @@ class CollisionWorld:
         def arr(xs: list[Array], shape: tuple[int, ...]) -> Array:
             return np.stack(xs).astype(np.float64) if xs else np.zeros((0,) + shape)
 
-        tree, normals = None, None
+        tree, normals, point_r = None, None, 0.0
         if clouds:
             tree = cKDTree(np.concatenate([c.points for c in clouds]))
             normals = np.concatenate([c.normals for c in clouds])
+            point_r = max(c.point_radius() for c in clouds)
         coal_objs = [_coal_mesh(m) for m in meshes]
         return cls(
             dim=d,
@@ -226,6 +229,7 @@ class CollisionWorld:
             con_half=np.array([c.length / 2 for c in cones], dtype=np.float64),
             cloud_trees=[tree],
             cloud_normals=[normals],
+            cloud_radius=[point_r],
             coal_objects=[coal_objs],
             shapes=[coal_shapes],
             coal_items=[
@@ -274,6 +278,7 @@ class CollisionWorld:
             con_half=pad("con_half", np.zeros(())),
             cloud_trees=[w.cloud_trees[0] for w in worlds],
             cloud_normals=[w.cloud_normals[0] if w.cloud_normals else None for w in worlds],
+            cloud_radius=[w.cloud_radius[0] if w.cloud_radius else 0.0 for w in worlds],
             coal_objects=[w.coal_objects[0] for w in worlds],
             shapes=[w.shapes[0] for w in worlds],
             coal_items=[w.coal_items[0] for w in worlds],
@@ -351,13 +356,16 @@ class CollisionWorld:
                 tree = self.cloud_trees[i]
                 if tree is None:
                     continue
-                inside = boxes_contain_cloud_points(tree, ci, ri, hi)
+                inside = boxes_contain_cloud_points(tree, ci, ri, hi, self._cloud_margin(i))
                 if self.batch_shape == ():
                     hit |= inside
                 else:
                     hit[i] |= inside
         hit |= self._coal_query((c, rot, h), None, kind="box", meshes_only=False)
         return hit
+
+    def _cloud_margin(self, i: int) -> float:
+        return float(self.cloud_radius[i]) if i < len(self.cloud_radius) else 0.0
 
     def _spheres_vs_clouds(self, c: Array, r: Array) -> Bool:
         out = np.zeros(c.shape[:-1], dtype=bool)
@@ -366,9 +374,10 @@ class CollisionWorld:
             if tree is None:
                 continue
             flat = ci.reshape(-1, self.dim)
-            rmax = float(ri.max()) if ri.size else 0.0
+            reach = ri.reshape(-1) + self._cloud_margin(i)  # each point is a sphere of the cloud's point radius
+            rmax = float(reach.max()) if reach.size else 0.0
             dist, _ = tree.query(flat, k=1, distance_upper_bound=rmax + 1e-12)
-            res = (dist <= ri.reshape(-1)).reshape(ci.shape[:-1])
+            res = (dist <= reach).reshape(ci.shape[:-1])
             if self.batch_shape == ():
                 out |= res
             else:
@@ -454,9 +463,9 @@ def _sub_boxes(c: Array, rot: Array, h: Array, cap: int = 512) -> tuple[Array, A
     return centres, radius, owner
 
 
-def boxes_contain_cloud_points(tree: cKDTree, c: Array, rot: Array, h: Array) -> Bool:
-    """Does any point of the cloud in ``tree`` lie in (or on) each box ``c: (..., d)``,
-    ``rot: (..., d, d)``, ``h: (..., d)``? Only the points near a box are tested: the
+def boxes_contain_cloud_points(tree: cKDTree, c: Array, rot: Array, h: Array, margin: float = 0.0) -> Bool:
+    """Does any point of the cloud in ``tree`` lie within ``margin`` of (or in) each box
+    ``c: (..., d)``, ``rot: (..., d, d)``, ``h: (..., d)``? Only the points near a box are tested: the
     k-d tree rules out the boxes with no point within their circumscribed ball (most, in
     free space), then finds the points in balls around near-cubic pieces of the others
     (:func:`_sub_boxes`: the nearest point first, then a ball query), and each is tested with :func:`sphere_box_sqdist`'s arithmetic against
@@ -469,14 +478,14 @@ def boxes_contain_cloud_points(tree: cKDTree, c: Array, rot: Array, h: Array) ->
     if not len(fc) or not tree.n:
         return out.reshape(shape)
     # boxes with no point within their circumscribed ball are free: most, in free space
-    reach = np.sqrt(np.sum(fh * fh, -1)) * (1.0 + 1e-9) + 1e-12
+    reach = np.sqrt(np.sum(fh * fh, -1)) * (1.0 + 1e-9) + margin + 1e-12
     dist, _ = tree.query(fc, k=1, distance_upper_bound=float(reach.max()))
     boxes = np.flatnonzero(dist <= reach)
     if not len(boxes):
         return out.reshape(shape)
     centres, radius, piece_owner = _sub_boxes(fc[boxes], fr[boxes], fh[boxes])
     piece_owner = boxes[piece_owner]
-    radius = radius * (1.0 + 1e-9) + 1e-12  # a point in a piece is this close to its centre
+    radius = radius * (1.0 + 1e-9) + margin + 1e-12  # a point within margin of a piece is this close to its centre
     dist, _ = tree.query(centres, k=1, distance_upper_bound=float(radius.max()))
     near = np.flatnonzero(dist <= radius)
     if not len(near):
@@ -494,7 +503,7 @@ def boxes_contain_cloud_points(tree: cKDTree, c: Array, rot: Array, h: Array) ->
             local = local + diff[:, j] * r[:, j, i]
         excess = np.maximum(np.abs(local) - fh[owner, i], 0.0)
         d2 += excess * excess
-    out[owner[d2 <= 0.0]] = True
+    out[owner[d2 <= margin * margin]] = True
     return out.reshape(shape)
 
 

@@ -38,7 +38,8 @@ Conventions
   ``dot(normal, direction) <= 0``. On box edges and cylinder/cone rims the normal is that
   of the face the ray enters through.
 * Point clouds of the world (``cloud_trees``) are surfaces sampled by points: each point
-  stands for a small sphere (its radius :data:`SPLAT_FACTOR` times the cloud's median
+  stands for a small sphere (``PointCloud.point_radius``: by default
+  :data:`~pointplan.geometry.shapes.SPLAT_FACTOR` times the cloud's median
   nearest-neighbour spacing, so that a ray does not slip between the points of a sampled
   surface), and a ray hits the
   first such sphere it enters, with that point's normal (:func:`_cloud_hits`). A ray has
@@ -58,7 +59,6 @@ from typing import Any
 import numba
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from ._kernels import ray_box_compiled
 from .collision import CollisionWorld
@@ -546,31 +546,6 @@ def _mesh_hits(world: CollisionWorld, o2: Array, d2: Array, best: Array, inside:
         normal[b, r_idx] = n
 
 
-#: a cloud point stands for a sphere this many median nearest-neighbour spacings wide:
-#: measured on 20,000 area-weighted random points on two boxes, 2,000 rays (/tmp-free
-#: reproduction in tests/test_raycast.py): at 1.5 spacings 2% of the rays slip through the
-#: holes of a random sampling, at 2.5 none, with hit distances within 9 mm of the boxes'
-#: and every normal the box face's
-SPLAT_FACTOR = 2.5
-
-
-def cloud_splat_radius(tree: cKDTree) -> float:
-    """The radius of the sphere each point of a cloud stands for when rays are cast:
-    :data:`SPLAT_FACTOR` times the median distance to the nearest other point."""
-    if tree.n < 2:
-        return 1e-3
-    dist, _ = tree.query(tree.data, k=2)
-    return float(np.median(dist[:, 1])) * SPLAT_FACTOR
-
-
-def _splat_radius(world: CollisionWorld, b: int, tree: cKDTree) -> float:
-    """:func:`cloud_splat_radius` of scene ``b``'s cloud, computed once per world."""
-    cache = world.__dict__.setdefault("_splat_radii", {})
-    if b not in cache:
-        cache[b] = cloud_splat_radius(tree)
-    return float(cache[b])
-
-
 @numba.njit(cache=True, nogil=True)
 def _first_cloud_hits(o, d, pts, radius, best, which):  # type: ignore[no-untyped-def]
     """For each ray ``(o[i], d[i])`` (unit ``d``), the entry distance into the nearest of
@@ -604,7 +579,7 @@ def _cloud_hits(world: CollisionWorld, o2: Array, d2: Array, best: Array, inside
         tree = world.cloud_trees[b] if b < len(world.cloud_trees) else None
         if tree is None or not tree.n or not o2.shape[1]:
             continue
-        radius = _splat_radius(world, b, tree)
+        radius = world.cloud_radius[b] if b < len(world.cloud_radius) else 0.0
         centre = o2[b].mean(0)
         spread = float(np.sqrt(np.max(np.sum((o2[b] - centre) ** 2, -1))))
         reach = spread + max_range + radius
@@ -623,4 +598,4 @@ def _cloud_hits(world: CollisionWorld, o2: Array, d2: Array, best: Array, inside
         normal[b, got] = nrm[cand[which[got]]] if nrm is not None else np.nan
 
 
-__all__ = ["RayHits", "cast_rays", "cloud_splat_radius"]
+__all__ = ["RayHits", "cast_rays"]

@@ -134,17 +134,30 @@ class Mesh:
         return 3
 
 
+#: a cloud point stands for a sphere this many median nearest-neighbour spacings wide
+#: (:meth:`PointCloud.point_radius`): measured on 20,000 area-weighted random points on two
+#: boxes, 2,000 rays (tests/test_raycast.py): at 1.5 spacings 2% of the rays slip through
+#: the holes of a random sampling, at 2.5 none, with hit distances within 9 mm of the
+#: boxes' and every normal the face's
+SPLAT_FACTOR = 2.5
+
+
 @dataclass(frozen=True)
 class PointCloud:
     """Observed obstacle points with outward normals: ``points, normals: (P, d)``.
 
-    For collision a point cloud counts as a set of points: the robot collides when a point
-    lies inside its body.
+    A point cloud samples a surface: each point stands for a small sphere of radius
+    :meth:`point_radius` (``radius`` when given, else :data:`SPLAT_FACTOR` times the
+    median distance between nearest points), so that neither a ray nor the robot's body
+    slips between the points of a sampled surface. The collision checks, the ray caster
+    and the evaluator all use it.
     """
 
     points: Array
     normals: Array
     source: Path | None = None
+    radius: float | None = None
+    _auto_radius: float | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         p = np.asarray(self.points, np.float64)
@@ -155,10 +168,27 @@ class PointCloud:
         n = np.where(norm > 0, n / np.where(norm > 0, norm, 1.0), 0.0)
         object.__setattr__(self, "points", p)
         object.__setattr__(self, "normals", n)
+        if self.radius is not None and not (np.isfinite(self.radius) and self.radius >= 0):
+            raise ValueError(f"a point cloud's radius must be a finite number >= 0, not {self.radius}")
 
     @property
     def dim(self) -> int:
         return int(self.points.shape[1])
+
+    def point_radius(self) -> float:
+        """The radius of the sphere each point stands for (computed once)."""
+        if self.radius is not None:
+            return float(self.radius)
+        if self._auto_radius is None:
+            if len(self.points) < 2:
+                r = 0.0
+            else:
+                from scipy.spatial import cKDTree
+
+                dist, _ = cKDTree(self.points).query(self.points, k=2)
+                r = float(np.median(dist[:, 1])) * SPLAT_FACTOR
+            object.__setattr__(self, "_auto_radius", r)
+        return float(self._auto_radius)  # type: ignore[arg-type]
 
 
 Shape = Box | Sphere | Capsule | Cylinder | Cone | Mesh | PointCloud
