@@ -47,13 +47,17 @@ def _hybrid_factory(
     attempts: int = 1,
     action_noise: float = 1.0,
     escape: Any = None,
+    fallback: str = "birrt",
+    time_limit: float | None = None,
     **kw: Any,
 ) -> Planner:
     """The policy (``checkpoint`` or the shipped one, for ``scene`` if one ships), stopped when it stalls (moved less
-    than ``stall_distance`` over ``stall_steps`` steps) or at its horizon, then Bi-RRT
-    (``max_nodes``, ``seed``, other keywords) from its configuration closest to the goal.
-    ``attempts``, ``action_noise``, ``escape``: the policy's sampled retries and stall
-    escapes (:class:`PolicyPlanner`)."""
+    than ``stall_distance`` over ``stall_steps`` steps) or at its horizon, then the
+    ``fallback`` from its configuration closest to the goal: ``birrt`` (``max_nodes``,
+    ``seed``, other keywords) or ``ompl:NAME`` (OMPL's planner with pointplan's certified
+    motion checks; other keywords go to :class:`~pointplan.planners.ompl.OMPLPlanner`).
+    ``time_limit``: seconds for the whole query. ``attempts``, ``action_noise``,
+    ``escape``: the policy's sampled retries and stall escapes (:class:`PolicyPlanner`)."""
     from .hybrid import HybridPlanner
 
     policy = _policy_factory(
@@ -67,10 +71,26 @@ def _hybrid_factory(
         action_noise=action_noise,
         escape=escape,
     )
-    return HybridPlanner(policy, BiRRT(robot, max_nodes=max_nodes, seed=seed, **kw))  # type: ignore[arg-type]
+    if fallback.lower() == "birrt":
+        back: Any = BiRRT(robot, max_nodes=max_nodes, seed=seed, time_limit=time_limit, **kw)
+    elif fallback.lower().startswith("ompl:"):
+        from .ompl import make_ompl_planner
+
+        back = make_ompl_planner(robot, fallback[5:], time_limit=time_limit or 10.0, **kw)
+    else:
+        raise ValueError(f"the hybrid's fallback is 'birrt' or 'ompl:NAME', not {fallback!r}")
+    return HybridPlanner(policy, back, time_limit=time_limit)  # type: ignore[arg-type]
+
+
+def _hybrid_ompl_factory(robot: Robot, **kw: Any) -> Planner:
+    """The hybrid with OMPL's RRTConnect (pointplan's certified motion checks) as its
+    fallback, 10 s a query unless ``time_limit`` says otherwise (``pip install 'pointplan[ompl]'``)."""
+    kw.setdefault("time_limit", 10.0)
+    return _hybrid_factory(robot, fallback="ompl:RRTConnect", **kw)
 
 
 PLANNERS["hybrid"] = _hybrid_factory
+PLANNERS["hybrid-ompl"] = _hybrid_ompl_factory
 
 
 def _mpnet_factory(hybrid: bool) -> Callable[..., Planner]:

@@ -149,9 +149,12 @@ class BiRRT:
         goal_bias: float = 0.0,
         seed: int = 0,
         sampler: SamplerFactory | None = None,
+        time_limit: float | None = None,
     ) -> None:
         if step <= 0 or resolution <= 0:
             raise ValueError("step and resolution must be positive")
+        if time_limit is not None and not time_limit > 0:
+            raise ValueError(f"time_limit must be positive seconds or None, not {time_limit}")
         if not 0.0 <= goal_bias <= 1.0:
             raise ValueError("goal_bias is a probability")
         self.robot = robot
@@ -162,12 +165,14 @@ class BiRRT:
         self.goal_bias = float(goal_bias)
         self.seed = int(seed)
         self.sampler = sampler
+        #: seconds a query may search (``None``: no limit; ``max_nodes`` bounds it too)
+        self.time_limit = None if time_limit is None else float(time_limit)
         self.calls = 0
 
     def __repr__(self) -> str:
         return (
             f"BiRRT(max_nodes={self.max_nodes}, step={self.step}, resolution={self.resolution}, "
-            f"shortcut_iters={self.shortcut_iters}, goal_bias={self.goal_bias}, seed={self.seed})"
+            f"shortcut_iters={self.shortcut_iters}, goal_bias={self.goal_bias}, seed={self.seed}, time_limit={self.time_limit})"
         )
 
     def reset(self, seed: int | None = None) -> None:
@@ -198,7 +203,8 @@ class BiRRT:
         k = 0
         a = 0  # index of the tree that extends this iteration
         raw: Array | None = None
-        while trees[0].n + trees[1].n < self.max_nodes:
+        deadline = t0 + self.time_limit if self.time_limit is not None else np.inf
+        while trees[0].n + trees[1].n < self.max_nodes and time.perf_counter() < deadline:
             if k == len(samples):
                 samples = robot.sample_uniform(rng, _SAMPLE_BLOCK, low, high) if draw is None else draw(rng, _SAMPLE_BLOCK)
                 coins = rng.random(_SAMPLE_BLOCK)

@@ -1,11 +1,12 @@
-"""The policy first, Bi-RRT where it fails.
+"""The policy first, a classical planner where it fails.
 
 ``HybridPlanner`` rolls the policy out (batch 1, :class:`~pointplan.planners.policy.PolicyPlanner`)
 and keeps its path when it ends at the goal. Otherwise, when the horizon ends, when the
 policy stalls (its last ``stall_steps`` steps took it less than ``stall_distance`` from
 where it was: 10 steps and 0.035 by default), or when the last connection to the goal is
-blocked, Bi-RRT plans from the last
-good configuration of the rollout to the goal, and the two pieces make one path:
+blocked, the fallback (Bi-RRT, or OMPL's RRTConnect with pointplan's certified motion
+checks: ``hybrid-ompl``) plans from the last good configuration of the rollout to the
+goal, within what is left of the query's ``time_limit``, and the two pieces make one path:
 
 - after a stall or the horizon, the last good configuration is the one closest to the
   goal (the dithering after it is dropped from the path, not from the node count);
@@ -16,36 +17,49 @@ Every configuration of the rollout is collision-free (the environment's motion c
 a move before it collides), so the joined path is free wherever its pieces are; the
 evaluator checks it like every path. ``nodes`` = policy steps + Bi-RRT nodes,
 ``collision_checks`` = both planners' checks. ``info`` says what happened
-(``policy_steps``, ``birrt_nodes``, ``policy_end``, ``repaired``).
+(``policy_steps``, ``birrt_nodes`` (the fallback's nodes, whichever it is), ``policy_end``,
+``repaired``, ``fallback``).
 """
 
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 
 from ..robots.base import Robot
 from ..scenes.scene import Problem
 from .base import PlanResult
-from .birrt import BiRRT
 from .policy import PolicyPlanner
 
 
 class HybridPlanner:
-    """The policy, repaired by Bi-RRT where it fails or stalls."""
+    """The policy, repaired by a classical planner where it fails or stalls.
+
+    ``fallback``: any planner whose ``robot`` is the policy's (Bi-RRT, ``OMPLPlanner``);
+    ``time_limit``: seconds for the whole query (``None``: the fallback's own limits). The
+    fallback gets what the policy left of it, through its ``time_limit`` attribute."""
 
     name = "hybrid"
 
-    def __init__(self, policy: PolicyPlanner, birrt: BiRRT) -> None:
-        if policy.robot.name != birrt.robot.name:
-            raise ValueError("the policy and Bi-RRT plan for different robots")
+    def __init__(self, policy: PolicyPlanner, fallback: Any, time_limit: float | None = None) -> None:
+        if policy.robot.name != fallback.robot.name:
+            raise ValueError("the policy and the fallback plan for different robots")
+        if time_limit is not None and not time_limit > 0:
+            raise ValueError(f"time_limit must be positive seconds or None, not {time_limit}")
         self.policy = policy
-        self.birrt = birrt
+        self.fallback = fallback
+        self.time_limit = time_limit
         self.robot: Robot = policy.robot
 
+    @property
+    def birrt(self) -> Any:
+        """The fallback planner (named for the default one)."""
+        return self.fallback
+
     def __repr__(self) -> str:
-        return f"HybridPlanner(stall_steps={self.policy.stall_steps}, horizon={self.policy.horizon}, birrt={self.birrt!r})"
+        return f"HybridPlanner(stall_steps={self.policy.stall_steps}, horizon={self.policy.horizon}, fallback={self.fallback!r}, time_limit={self.time_limit})"
 
     def plan(self, problem: Problem) -> PlanResult:
         t0 = time.perf_counter()
@@ -63,10 +77,12 @@ class HybridPlanner:
             d = robot.distance(path, problem.goal[None])
             cut = int(np.flatnonzero(d <= d.min())[-1])  # the last of the closest ones
         sub = Problem(problem.scene, path[cut].copy(), problem.goal, tag=f"{problem.tag}/repair")
-        second = self.birrt.plan(sub)
+        if self.time_limit is not None:  # what the policy left of the query's budget
+            self.fallback.time_limit = max(self.time_limit - (time.perf_counter() - t0), 1e-3)
+        second = self.fallback.plan(sub)
         nodes = first.nodes + second.nodes
         checks = first.collision_checks + second.collision_checks
-        info.update(birrt_nodes=second.nodes, repaired=True, repaired_from=cut)
+        info.update(birrt_nodes=second.nodes, repaired=True, repaired_from=cut, fallback=getattr(self.fallback, "name", type(self.fallback).__name__))
         dt = time.perf_counter() - t0
         if not second.success:
             return PlanResult.failure(robot.config_dim, nodes, checks, dt, info=info)
