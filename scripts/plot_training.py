@@ -1,6 +1,6 @@
 """Plot validation success against wall time (and env steps) for training runs.
 
-    python scripts/plot_training.py runs/a/metrics.csv runs/b/metrics.csv -o docs/img/training.png \
+    python scripts/plot_training.py runs/a/metrics.csv runs/b/metrics.csv -o docs/img/training.png \\
         --labels "SAC+HER from scratch" "BC then SAC+HER"
 """
 
@@ -30,14 +30,14 @@ def read(path: Path, offset_s: float = 0.0, metric: str = "val_success") -> dict
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("csv", nargs="+", type=Path)
-    ap.add_argument("--labels", nargs="*")
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("csv", nargs="+", type=Path, help="metrics.csv files of training runs (pointplan train, bc, ppo)")
+    ap.add_argument("--labels", nargs="*", help="one legend label per run (default: each run's folder name)")
     ap.add_argument("--offsets", nargs="*", type=float, help="seconds to add to each run's wall time (e.g. BC time)")
     ap.add_argument("--ymin", type=float, default=0.0, help="lower end of the success axis (e.g. 0.95 to see late training)")
     ap.add_argument("--from-steps", type=float, default=0.0, help="leave out evaluations before this many env steps")
     ap.add_argument("--metrics", nargs="*", help="the column plotted for each run (default: val_success; e.g. val_success_escape of pointplan ppo)")
-    ap.add_argument("-o", "--output", default="training.png")
+    ap.add_argument("-o", "--output", default="training.png", help="the PNG to write (default: %(default)s)")
     args = ap.parse_args()
     labels = args.labels or [p.parent.name for p in args.csv]
     offsets = args.offsets or [0.0] * len(args.csv)

@@ -1,4 +1,4 @@
-"""How robust is the shipped 2D policy? (issue 14)
+"""How robust is the shipped 2D policy?
 
     OMP_NUM_THREADS=1 python scripts/robustness.py --episodes 400                    # everything
     python scripts/robustness.py --parts variants --episodes 200
@@ -9,7 +9,7 @@ Parts (markdown tables on stdout; ``--json`` writes the numbers):
 
 - ``variants``: the policy, the hybrid planner and Bi-RRT on the 2D-Narrow test problems
   and on the variants' test problems (``narrow2d-ends``, ``-many``, ``-narrow``,
-  ``-manynarrow``, ``docs/results.md``): success (paths re-checked by the evaluator),
+  ``-manynarrow``, ``docs/guide/scenarios.md``): success (paths re-checked by the evaluator),
   nodes, time per problem.
 - ``noise``: the policy on the 2D-Narrow test problems with perturbed observations
   (:mod:`pointplan.observers.perturb`): Gaussian noise on the observed points' positions,

@@ -5,7 +5,7 @@ by the planner (its escape and greedy goal test, one attempt) on the validation 
 that band in order, from the problem's start; the first solved rollout is drawn. Where none
 of ``--tries`` is solved from the start, the rollouts start instead at the slot threading
 template's approach pose (0.3 before the wall, turned for the threading; the title says
-so), as ``scripts/slot_rollout_stages.py --from-approach`` does. Every drawn path is
+so), as ``experiments/slot_rollout_stages.py --from-approach`` does. Every drawn path is
 certified by the evaluator's ``check_path``.
 
     python scripts/slot_gifs.py src/pointplan/data/slot_sshape_local_policy.pt -o docs/img/slot_policy

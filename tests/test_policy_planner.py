@@ -423,7 +423,7 @@ def test_subgoal_escape_frees_a_dithering_sphere(observation: str) -> None:
 
 def test_rollouts_can_go_on_after_a_moving_box_hits_the_robot() -> None:
     """``rollout_batch(crush_ends=False)`` (a comparison with a laxer rule than pointplan's,
-    ``scripts/dynamic_crush.py``): where a moving box runs into the robot, the strict rollout
+    ``experiments/dynamic_crush.py``): where a moving box runs into the robot, the strict rollout
     ends there as a crushed failure; the lax one is the same up to that step, goes on, and
     counts the hits."""
     from pointplan.envs.core import EnvConfig

@@ -1,11 +1,12 @@
 """A privileged expert for Slot: one threading of the slot, placed on every slot.
 
 Demonstrations from Bi-RRT thread each slot in their own way, and a policy cloned from them
-averages the ways (``docs/learning.md``). This expert always threads the same way. Its
+averages the ways (``docs/notebook/slot.md``). This expert always threads the same way. Its
 *template* is a path through a reference slot (centred, long along y, ``width_bars`` bar
-thicknesses wide), planned once by ``scripts/slot_canonical_expert.py template`` (the
-guided sweep, simplified, certified) and shipped as ``data/slot_threading.npz``. It serves
-every slot at least that wide:
+thicknesses wide), planned once by :func:`template_candidates` (the guided sweep of
+:mod:`pointplan.planners.slot_sweep`, simplified; ``scripts/slot_expert.py template``
+certifies it and writes it with :func:`save_template`) and shipped as
+``data/slot_threading.npz``. It serves every slot at least that wide:
 
 - a slot centred elsewhere is the reference wall moved along itself: move the template;
 - a slot long along z is the reference turned 90 degrees about x: turn the template;
@@ -30,6 +31,8 @@ pose is (once the robot is at the wall), so that the approach asks for less turn
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable, Iterator, Sequence
 from importlib import resources
 from pathlib import Path
 
@@ -37,8 +40,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..robots.base import Robot
-from ..robots.sshape import BAR_THICKNESS
+from ..robots.sshape import BAR_THICKNESS, SShape
 from ..scenes.scene import Problem
+from ..scenes.scenes3d import SlotScenario
 from .birrt import BiRRT
 from .edges import edge_free
 
@@ -54,6 +58,8 @@ SYMMETRIES = (
 )
 #: metres of distance that weigh as much as a radian of turn, when the nearest pose is sought
 METRES_PER_RADIAN = 0.1
+#: how far before and past the wall (along x) a template's first and last poses are moved
+BACK = 0.3
 
 
 def _turn_angle(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
@@ -160,3 +166,60 @@ class SlotThreading:
         if tail is None:
             return None
         return np.concatenate([head, rest, tail[1:]])
+
+
+def reference_problem(width_bars: float) -> Problem:
+    """A problem in the reference slot (centred, long along y, ``width_bars`` bar
+    thicknesses wide); its start and goal are placeholders, a template does not use them."""
+    scene = SlotScenario("sshape").wall(width_bars * BAR_THICKNESS, np.zeros(3), 1)
+    q = np.array([-0.4, 0, 0, 0, 0, 0, 1.0])
+    return Problem(scene, q, q)
+
+
+def template_candidates(
+    width_bars: float,
+    seed: int = 0,
+    tries: int = 2,
+    orders: Sequence[str] = ("A", "E"),
+    ds: float = 0.004,
+    min_clearance: float = 0.0015,
+    guide: float = 0.05,
+    margin: float = 0.0,
+    log: Callable[[str], None] | None = None,
+) -> Iterator[tuple[str, np.ndarray]]:
+    """Templates for the reference slot of ``width_bars``, in the order they are found: for
+    each of ``tries`` rounds and each leading bar of ``orders``, the guided sweep through the
+    slot (:func:`pointplan.planners.slot_sweep.sweep`; one random stream, seeded by
+    ``seed``, for them all), simplified for the body grown by ``margin`` (so that the
+    shortcuts keep that room), its first pose moved :data:`BACK` before the wall and its
+    last :data:`BACK` past it. Yields ``(leading bar, (N, 7) poses)``; the next is planned
+    only when asked for. They are not certified here: the caller checks each in
+    :func:`reference_problem` (the evaluator's ``check_path``) and keeps the first that
+    passes. ``log`` gets a line per sweep and why a sweep gave up."""
+    from .slot_sweep import simplify, sweep
+
+    robot = SShape()
+    problem = reference_problem(width_bars)
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    for attempt in range(tries):
+        for order in orders:
+            poses = sweep(robot, problem, order, ds, rng, log, min_clearance, guide)
+            if log is not None:
+                log(f"try {attempt}, led by {order}: {'found' if poses is not None else 'stuck'} ({time.perf_counter() - t0:.0f} s)")
+            if poses is None:
+                continue
+            raw = np.array(poses)
+            ends = Problem(problem.scene, raw[0], raw[-1])
+            path = simplify(robot.padded(margin) if margin > 0 else robot, ends, raw, seed)
+            first, last = path[0].copy(), path[-1].copy()
+            first[0] -= BACK
+            last[0] += BACK
+            yield order, np.concatenate([first[None], path, last[None]])
+
+
+def save_template(path: str | Path, poses: np.ndarray, width_bars: float, order: str, seed: int, clearance: float) -> None:
+    """Write a template as :meth:`SlotThreading.load` reads it (``np.savez``: ``poses`` and
+    ``width_bars``, with the leading bar, the seed and the certified clearance it was made
+    with)."""
+    np.savez(path, poses=np.asarray(poses, np.float64), width_bars=float(width_bars), order=str(order), seed=int(seed), clearance=float(clearance))

@@ -9,7 +9,7 @@ taken at its state nearest (in position) to the template's insertion pose on tha
 the world-frame turn from the insertion pose to it is sorted by its angle and by its axis
 (within 30 degrees of the wall's normal, x, or not).
 
-    python scripts/slot_turn_errors.py src/pointplan/data/slot_sshape_local_policy.pt --demos runs/demos_slot_canonical.npz --back 32 40 48 56
+    python experiments/slot_turn_errors.py src/pointplan/data/slot_sshape_local_policy.pt --demos runs/demos_slot_canonical.npz --back 32 40 48 56
 """
 
 from __future__ import annotations

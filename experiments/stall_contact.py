@@ -1,11 +1,11 @@
-"""Where a policy's failed rollouts end: pinned against an obstacle, or free (issue 13).
+"""Where a policy's failed rollouts end: pinned against an obstacle, or free.
 
 Rolls a policy checkpoint out with its mean action on validation problems and, for the
 failures, counts how many of the last 20 steps collided (the environment then moves the
 robot to the last free configuration along the action, here none: it stays in place),
 how far the robot moved in them, and the first step that collided:
 
-    python scripts/stall_contact.py checkpoints/sshape_local_bc_spread.pt --episodes 200
+    python experiments/stall_contact.py checkpoints/sshape_local_bc_spread.pt --episodes 200
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Where learned sampling's nodes go (docs/results.md, issue 16).
+"""Where learned sampling's nodes go (docs/results/baselines-mpnet-lsample.md).
 
 1. Per problem, on the test problems (the ones `pointplan eval` plans, same seeds): nodes of
    Bi-RRT against lsample-0.5 / lsample-0.9 (percentiles; problems better or worse by more
@@ -7,7 +7,7 @@
    its targets from a known solution (a Bi-RRT path planned with another seed, resampled by
    arc length, plus Gaussian noise): what a perfect learned sampler could save.
 
-    OMP_NUM_THREADS=1 python scripts/lsample_analysis.py --test 400 --val 200
+    OMP_NUM_THREADS=1 python experiments/lsample_analysis.py --test 400 --val 200
 """
 
 from __future__ import annotations

@@ -14,8 +14,8 @@ Also reported: at the visited state nearest (in position) to the insertion pose,
 it was and by how much it was turned, and how many of those turns were 60-120 degrees
 (the slot's long axis taken for the other one).
 
-    python scripts/slot_rollout_stages.py runs/bc_slot_local/bc.pt --episodes 50
-    python scripts/slot_rollout_stages.py runs/bc_slot_local/bc.pt --episodes 50 --from-approach
+    python experiments/slot_rollout_stages.py runs/bc_slot_local/bc.pt --episodes 50
+    python experiments/slot_rollout_stages.py runs/bc_slot_local/bc.pt --episodes 50 --from-approach
 
 With ``--from-approach`` each rollout starts where the expert's approach ends, which
 measures the threading alone.

@@ -1,8 +1,8 @@
 """How often a policy's mean action arrives when started k steps before the goal of a
 demonstration path (the starts of ``pointplan ppo --start-demos``).
 
-    python scripts/demo_start_success.py CKPT --demos runs/demos_slot_canonical.npz --env slot --back 1 4 8 16 32 40
-    python scripts/demo_start_success.py CKPT --demos ... --greedy-goal   # with the planner's goal test
+    python experiments/demo_start_success.py CKPT --demos runs/demos_slot_canonical.npz --env slot --back 1 4 8 16 32 40
+    python experiments/demo_start_success.py CKPT --demos ... --greedy-goal   # with the planner's goal test
 
 Without ``--greedy-goal`` a rollout succeeds as in training: within the environment's
 goal tolerance. The demonstrations are the last ``--paths`` of the file.

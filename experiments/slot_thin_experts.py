@@ -17,9 +17,9 @@ has no demonstrations there. This plans training problems of 2-4 bars (``SlotCon
 Every solution is re-checked by the evaluator (``check_path``). One line per problem:
 slot width in bars, solved, nodes, seconds.
 
-    python scripts/slot_thin_experts.py ompl --planners BKPIECE1 LBKPIECE1 RRTConnect PRM --time-limit 20
-    python scripts/slot_thin_experts.py biased --share 0.7 --spread 0.25 --max-nodes 20000
-    python scripts/slot_thin_experts.py aligned --share 0.7 --noise 0.05 --max-nodes 20000
+    python experiments/slot_thin_experts.py ompl --planners BKPIECE1 LBKPIECE1 RRTConnect PRM --time-limit 20
+    python experiments/slot_thin_experts.py biased --share 0.7 --spread 0.25 --max-nodes 20000
+    python experiments/slot_thin_experts.py aligned --share 0.7 --noise 0.05 --max-nodes 20000
 """
 
 from __future__ import annotations

@@ -1,14 +1,14 @@
 """Is reaching the goal worth it? Discounted returns of Bi-RRT's demonstrations under the
 environment's reward, against the return of standing still for a whole episode.
 
-The reward is ``-action_cost |a| - 0.1`` per free step and ``+20`` on arrival (NOTES.md,
+The reward is ``-action_cost |a| - 0.1`` per free step and ``+20`` on arrival (docs/reference/design.md,
 `EnvConfig`). Each demonstration is replayed as the actions that take one configuration to
 the next (``log(q_t^-1 q_t+1)`` over the robot's action scale, as ``pointplan bc`` clones
 them); its return is compared with ``sum_t -0.1 gamma^t`` over the horizon, what a policy
 that never moves (and never collides) earns. Where a demonstration earns less, the reward
 itself tells the learner not to go.
 
-    python scripts/demo_returns.py runs/demos_boxes3d_sshape_3k.npz --costs 1 0.5 0.25
+    python experiments/demo_returns.py runs/demos_boxes3d_sshape_3k.npz --costs 1 0.5 0.25
 """
 
 from __future__ import annotations

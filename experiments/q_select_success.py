@@ -5,7 +5,7 @@ validation problems (seeded) with, at every step, the actor's mean action, one s
 action, or the best of ``N`` candidates (the mean and ``N - 1`` samples) by the critics'
 ``min(Q1, Q2)``:
 
-    python scripts/q_select_success.py runs/sac_sshape_r10/last.pt --episodes 200 --candidates 1 8 32
+    python experiments/q_select_success.py runs/sac_sshape_r10/last.pt --episodes 200 --candidates 1 8 32
 
 ``--candidates 1`` is the mean action; ``--sampled`` adds the plain sampled policy.
 """

@@ -1,5 +1,6 @@
-"""scripts/slot_perception_probe.py: its count of the rays that cross Slot's opening,
-checked against the ray caster (which knows nothing of the opening, only the boxes)."""
+"""experiments/slot_perception_probe.py: its count of the rays that cross Slot's opening,
+checked against the ray caster (which knows nothing of the opening, only the boxes).
+Run by hand (``python -m pytest experiments/test_slot_probe.py``); CI does not."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from pointplan.geometry.raycast import cast_rays
 from pointplan.observers import make_observer
 from pointplan.scenes.scenarios import make_scenario
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "slot_perception_probe.py"
+SCRIPT = Path(__file__).resolve().parent / "slot_perception_probe.py"
 
 
 def _probe_module():  # type: ignore[no-untyped-def]

@@ -1,4 +1,4 @@
-"""Self-imitation (filtered behavioural cloning) from a cloned actor (exploratory, issue 13).
+"""Self-imitation (filtered behavioural cloning) from a cloned actor (exploratory).
 
 The spread-cloned S-shape actor solves 35% of the validation problems with its mean action
 and 58% with sampled actions: its mean stalls in contact with an obstacle, pushing into it
@@ -10,7 +10,7 @@ actor a few more passes on all of them. Conditioning on success re-weights the p
 own actions by how often they lead to the goal (reward-weighted regression with a 0/1
 reward), so the mean moves towards the actions that got the samples out of the stalls.
 
-    python scripts/self_imitation.py checkpoints/sshape_local_bc_spread.pt \\
+    python experiments/self_imitation.py checkpoints/sshape_local_bc_spread.pt \\
         --demos runs/demos_boxes3d_sshape_3k.npz --rounds 8 --rollouts 1000 --out runs/selfim_sshape
 
 Writes ``OUT/round_K.pt`` (a policy checkpoint) and ``OUT/metrics.csv``; validation is on

@@ -1,15 +1,15 @@
 """How much of a policy's failure in 3D-Dynamic is being run into by a moving box.
 
 pointplan ends an episode as a failure when a moving obstacle runs into the robot
-(``docs/design.md``); the paper does not say what its environment did then. This rolls the
+(``docs/reference/design.md``); the paper does not say what its environment did then. This rolls the
 shipped policy out on validation problems of 3D-Dynamic twice, with the planner's escape
 for the robot: once as pointplan does (a hit ends it; every success re-checked by the
 evaluator), once letting the rollout go on after a hit (the robot stays where it is until
 it can move again), and counts the successes of each and how many of the second kind were
 ever hit. The second number is a comparison with a laxer rule, never a planner's success:
 
-    python scripts/dynamic_crush.py --robot sphere3d --observation local
-    python scripts/dynamic_crush.py --robot sshape --observation global
+    python experiments/dynamic_crush.py --robot sphere3d --observation local
+    python experiments/dynamic_crush.py --robot sshape --observation global
 """
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
 """Escapes through the planner itself: success of ``PolicyPlanner`` with each escape on
-validation problems (docs/learning.md, "Escaping a stall"). Each ``--configs`` entry is
+validation problems (docs/results/3d-sphere.md, "How the escape was chosen"). Each ``--configs`` entry is
 ``STEPS:NOISE:STILL:WINDOW[:subgoal]`` (``0`` alone: no escape), for example the sphere's
 default and the S-shape's:
 
-    python scripts/escape_sweep.py --robot sphere3d --observation local --episodes 500 --configs 0 10:0:0.1:6:subgoal
-    python scripts/escape_sweep.py --robot sshape --observation global --configs 10:2:0.01:1 10:0:0.01:1:subgoal
+    python experiments/escape_sweep.py --robot sphere3d --observation local --episodes 500 --configs 0 10:0:0.1:6:subgoal
+    python experiments/escape_sweep.py --robot sshape --observation global --configs 10:2:0.01:1 10:0:0.01:1:subgoal
 
 ``--val-seed 1`` draws another 500 validation problems, to confirm a choice made on the
 first draw. Every path is re-checked by the evaluator (``claims disagree``).

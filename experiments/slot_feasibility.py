@@ -14,7 +14,7 @@ coordinates) from many random starts; a negative best clearance is therefore evi
 not proof, that the width is impassable. Every positive best is re-checked with
 pointplan's own collision test of the robot in a Slot scene of that width.
 
-    python scripts/slot_feasibility.py --widths 2 2.5 3 3.5 4 --starts 200 --json docs/data/slot/feasibility.json
+    python experiments/slot_feasibility.py --widths 2 2.5 3 3.5 4 --starts 200 --json docs/data/slot/feasibility.json
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Does a multi-modal policy clone the S-shape's expert better? (exploratory)
 
 The cloned S-shape actor's mean action stalls at the first obstacle, while its sampled
-actions get round it (docs/learning.md, "The S-shape"). One reading: where the
+actions get round it (docs/notebook/sshape.md). One reading: where the
 demonstrations go round an obstacle on either side, a single Gaussian's mean points between
 them. This fits a mixture of ``K`` Gaussians (diagonal, in action space) on the same
 demonstrations, with the same PointNet encoder and head as ``pointplan bc``, and rolls out
@@ -11,7 +11,7 @@ on the validation problems:
   paper evaluates a policy);
 - ``sample``: a component drawn by its weight, then its mean.
 
-    python scripts/mixture_bc.py runs/demos_boxes3d_sshape_3k.npz --components 1 5 --epochs 40
+    python experiments/mixture_bc.py runs/demos_boxes3d_sshape_3k.npz --components 1 5 --epochs 40
 
 ``--components 1`` is the single-Gaussian baseline under the same training loop.
 """

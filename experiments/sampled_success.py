@@ -4,8 +4,8 @@ The critics of SAC learn the value of the *sampled* policy; a cloned actor whose
 never fitted can solve many problems with its mean action and few with its samples. This
 measures both on the validation problems (seeded):
 
-    python scripts/sampled_success.py runs/bc_sshape_spread/bc.pt --episodes 200
-    python scripts/sampled_success.py runs/bc_sshape_spread/bc.pt --scales 0 0.25 0.5 1
+    python experiments/sampled_success.py runs/bc_sshape_spread/bc.pt --episodes 200
+    python experiments/sampled_success.py runs/bc_sshape_spread/bc.pt --scales 0 0.25 0.5 1
 
 ``--scales`` samples ``tanh(mean + s * std * noise)`` for each ``s`` (0 is the mean action,
 1 the policy's own spread).

@@ -29,7 +29,7 @@ from a pool 4x denser and only within ``--near-radius`` of the robot's frame: th
 Training workspaces and validation workspaces are disjoint (``train`` and ``val``
 splits). Output: a JSON summary (``--json``) and a table on stdout.
 
-    python scripts/slot_perception_probe.py --json docs/data/slot/perception_probe.json
+    python experiments/slot_perception_probe.py --json docs/data/slot/perception_probe.json
 """
 
 from __future__ import annotations
