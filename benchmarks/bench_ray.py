@@ -9,7 +9,7 @@
    first task imports pointplan), warm (a second run), and with Ray's start-up (what a
    fresh ``pointplan eval --workers`` pays once).
 2. Training: the same small SAC run (empty2d by default, the settings of
-   ``docs/learning.md``) serially and with ``--workers`` rollout workers; prints the
+   ``docs/guide/training.md``) serially and with ``--workers`` rollout workers; prints the
    validation success at each evaluation (per environment step) and the environment
    steps per second of each.
 
@@ -126,7 +126,9 @@ def main() -> None:
     ap.add_argument("--train-env", default="empty2d")
     ap.add_argument("--train-robot", help="robot of a 3D training scenario (sphere3d or sshape; its observation is `local`)")
     ap.add_argument("--train-steps", type=int, default=6000, help="0 skips the training part")
-    ap.add_argument("--train-updates-per-step", type=float, default=0.5, help="gradient steps per env step (default: %(default)s, as in docs/learning.md)")
+    ap.add_argument(
+        "--train-updates-per-step", type=float, default=0.5, help="gradient steps per env step (default: %(default)s, as in docs/guide/training.md)"
+    )
     args = ap.parse_args()
     print(load())
     if args.episodes > 0:

@@ -642,7 +642,7 @@ def test_q_free_tiny_move_into_box_collides(index: int, box: int, side: int, t: 
     np.testing.assert_array_equal(new_q[0], start)
     # the same move away from the wall is free and taken in full when the disc, grown as
     # the certified check grows it at its samples (by at most sqrt(r^2 + (move / 2)^2) - r
-    # plus a contact margin of 1e-5: docs/design.md, "Certified motions"), is free at both
+    # plus a contact margin of 1e-5: docs/reference/design.md, "Certified motions"), is free at both
     # ends; closer to the wall the conservative check may refuse it
     new_q, collided, _ = q_free(robot, scene.world, start[None], -twist[None], scene.low[None], scene.high[None])
     grown = Disc2D(radius=float(np.sqrt(robot.radius**2 + (move / 2) ** 2)) + 1e-5 + 1e-7)

@@ -229,7 +229,7 @@ def mpnet_payload(
 
 def shipped_mpnet(robot: str = "disc2d") -> Path:
     """The MPNet checkpoint shipped for ``robot`` (``disc2d``: trained in 2D-Narrow;
-    ``sphere3d``: trained in 3D-Boxes, used in every 3D scenario; docs/results.md)."""
+    ``sphere3d``: trained in 3D-Boxes, used in every 3D scenario; docs/results/README.md)."""
     from importlib.resources import files
 
     name = SHIPPED_MPNET.get(robot)

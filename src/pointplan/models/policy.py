@@ -183,12 +183,12 @@ SHIPPED: dict[tuple[str, str], str] = {
 }
 #: policies trained for one scene, taken there before the 3D-Boxes ones: (robot,
 #: observation, scenario) -> file in ``pointplan/data``. Slot's is the paper's Slot policy
-#: (trained on Slot; docs/results.md, "Slot").
+#: (trained on Slot; docs/results/README.md, "Slot").
 SHIPPED_FOR_SCENE: dict[tuple[str, str, str], str] = {
     ("sshape", "local", "slot"): "slot_sshape_local_policy.pt",
 }
 #: the observation a robot's policy uses when none is asked for (the better of the two on
-#: the validation problems where both ship; docs/results.md)
+#: the validation problems where both ship; docs/results/README.md)
 DEFAULT_OBSERVATION = {"disc2d": "surface-normals", "sphere3d": "global", "sshape": "local"}
 
 
@@ -201,7 +201,7 @@ def shipped_policies() -> list[tuple[str, str]]:
 
 def shipped_checkpoint(robot: str = "disc2d", observation: str | None = None, scene: str | None = None) -> Path:
     """The path of the policy shipped for ``robot`` and ``observation`` (see
-    docs/results.md for how each was trained and what it scores). With ``scene`` (a
+    docs/results/README.md for how each was trained and what it scores). With ``scene`` (a
     scenario's name), the policy trained for that scene if one ships
     (:data:`SHIPPED_FOR_SCENE`), else the robot's."""
     from importlib.resources import files

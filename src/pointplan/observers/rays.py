@@ -173,7 +173,7 @@ def nearest_subsets(counts: NDArray[np.int64], n: int, rng: np.random.Generator)
 class NearestRays(LocalRays):
     """:class:`LocalRays` keeping the ``n_points`` hits nearest to the robot's body (by ray
     length) instead of a random subset, so that an obstacle the robot touches is always in
-    the observation (a deviation from the paper; ``docs/learning.md``)."""
+    the observation (a deviation from the paper; ``docs/notebook/sshape.md``)."""
 
     name = "local-near"
     nearest = True
@@ -187,7 +187,7 @@ class WideRays(LocalRays):
     locates the opening from them barely better than with the opening closed; with these,
     13 rays cross it and the probe gains as much from the opening as from ``global``'s
     points (a deviation from the
-    paper; ``docs/learning.md``, "Can the S-shape see the slot?")."""
+    paper; ``docs/results/slot.md``, "Can the observations show the opening?")."""
 
     name = "local-wide"
 

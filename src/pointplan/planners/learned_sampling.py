@@ -33,7 +33,7 @@ CHECKPOINT_KIND = "lsample-cvae"
 
 
 def shipped_sampler(robot: str = "disc2d") -> Path:
-    """The path of the sampler network shipped for ``robot`` (docs/results.md says how it
+    """The path of the sampler network shipped for ``robot`` (docs/results/README.md says how it
     was trained and what it scores)."""
     from importlib.resources import files
 

@@ -192,7 +192,7 @@ class Robot(ABC):
         everything the body sweeps (each body point lies within the growth of its own
         position at the nearest sample). ``reach = 1``: the grown body at sample 1 together
         with the plain body at sample 0 contain everything swept during the first
-        sub-step. ``reach = 0``: the plain sizes. Proofs in ``docs/design.md``.
+        sub-step. ``reach = 0``: the plain sizes. Proofs in ``docs/reference/design.md``.
 
         Robots that only translate: a sphere part of radius ``r`` moves on a straight line
         and becomes ``sqrt(r^2 + (reach |v|)^2)``; a box part grows along each of its axes

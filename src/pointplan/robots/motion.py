@@ -6,7 +6,7 @@ radius ``r`` can cut ``r - sqrt(r^2 - (delta/2)^2)`` into a box corner between s
 ``delta`` apart). Here each sample is checked with the robot's body *grown* so that the
 grown bodies at the samples cover everything the body sweeps between them
 (:meth:`Robot.grown_parts <pointplan.robots.base.Robot.grown_parts>` gives the growth per
-robot; ``docs/design.md`` proves the covers). If no grown sample collides, no
+robot; ``docs/reference/design.md`` proves the covers). If no grown sample collides, no
 configuration of the motion does, and none comes within :data:`CONTACT_MARGIN` of an
 obstacle.
 

@@ -145,7 +145,7 @@ class YCB3DScenario(Scenario3D):
     scaled so that its longest side is uniform in [0.15, 0.5] like a box's side.
 
     ``objects`` maps names to mesh files; by default the set that ships with the package's
-    dependencies (see ``docs/ycb.md``); pass ``find_ycb_objects(root)`` to use a YCB download.
+    dependencies (see ``docs/guide/scenarios.md``); pass ``find_ycb_objects(root)`` to use a YCB download.
     """
 
     name = "ycb3d"

@@ -3,7 +3,7 @@
 * :func:`find_ycb_objects` reads the dataset's own folder layout, as downloaded from the YCB
   site (``<root>/<id>_<name>/google_16k/textured.obj`` and friends).
 * :func:`default_ycb_objects` returns the curated default set that ships without a download
-  (see ``docs/ycb.md`` for where it comes from).
+  (see ``docs/guide/scenarios.md`` for where it comes from).
 * :func:`load_object_mesh` turns a mesh file into a small, closed, centred
   :class:`~pointplan.geometry.shapes.Mesh` in metres (cached).
 * :func:`place_mesh` scales, rotates and translates a mesh into the world.
@@ -113,7 +113,7 @@ def default_ycb_objects() -> dict[str, Path]:
             return found
         tried.append(f"{what} ({folder})")
     raise FileNotFoundError(
-        "no bundled YCB meshes found; looked in " + "; ".join(tried) + ". Pass find_ycb_objects('<your YCB download>') instead (see docs/ycb.md)"
+        "no bundled YCB meshes found; looked in " + "; ".join(tried) + ". Pass find_ycb_objects('<your YCB download>') instead (see docs/guide/scenarios.md)"
     )
 
 
