@@ -6,7 +6,9 @@ import argparse
 import dataclasses
 import json
 import math
+import os
 import sys
+import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -67,19 +69,20 @@ def _given_problem(args: argparse.Namespace, scene: Any, robot: Any) -> list[Any
         if robot.config_dim == 7:
             q = np.concatenate([q[:3], q[3:] / np.linalg.norm(q[3:])])
         if np.any(q[: scene.dim] < scene.low) or np.any(q[: scene.dim] > scene.high):
-            raise CLIError(f"{what}: position {q[: scene.dim].tolist()} lies outside the bounds {scene.low.tolist()} .. {scene.high.tolist()}")
+            hint = "; --bounds sets them (low then high)" if getattr(args, "points", None) else " of the scene file"
+            raise CLIError(f"{what}: position {q[: scene.dim].tolist()} lies outside the bounds {scene.low.tolist()} .. {scene.high.tolist()}{hint}")
         qs.append(q)
     return [Problem(scene, qs[0], qs[1], tag=f"{scene.name}/given")]
 
 
 def _scenario(args: argparse.Namespace) -> Any:
     from .robots import make_robot
-    from .scenes.scenarios import FixedScenario, make_scenario
+    from .scenes.scenarios import make_scenario
 
     if getattr(args, "scene", None) and getattr(args, "points", None):
         raise CLIError("give either --scene or --points, not both")
     if getattr(args, "scene", None) or getattr(args, "points", None):
-        from .scenes.io import load_points_scene, load_scene
+        from .scenes.io import CloudScenario, load_points_scene, load_scene
 
         robot_arg = getattr(args, "robot", None)
         if getattr(args, "points", None):
@@ -91,7 +94,8 @@ def _scenario(args: argparse.Namespace) -> Any:
                 if dim is not None and len(bounds) != 2 * dim:
                     raise CLIError(f"--bounds: {robot_arg} moves in {dim}D, got {len(bounds)} numbers")
                 dim = len(bounds) // 2
-            scene = load_points_scene(args.points, dim=dim, bounds=None if bounds is None else (bounds[:dim], bounds[dim:]))
+            given = [q for q in (_numbers(getattr(args, "start", None), "--start"), _numbers(getattr(args, "goal", None), "--goal")) if q is not None]
+            scene = load_points_scene(args.points, dim=dim, bounds=None if bounds is None else (bounds[:dim], bounds[dim:]), include=given)
             sf_robot, fixed = None, []
         else:
             sf = load_scene(args.scene)
@@ -100,12 +104,27 @@ def _scenario(args: argparse.Namespace) -> Any:
         robot = make_robot(robot_name)
         if robot.dim != scene.dim:
             raise CLIError(f"robot {robot_name} is {robot.dim}D but the scene is {scene.dim}D")
-        given = _given_problem(args, scene, robot)
-        return FixedScenario(scene, robot, fixed=given or fixed)
+        scenario = CloudScenario(scene, robot, fixed=_given_problem(args, scene, robot) or fixed)
+        _warn_enclosed(scenario)
+        return scenario
     try:
         return make_scenario(args.env, robot=getattr(args, "robot", None))
     except ValueError as e:
         raise CLIError(str(e)) from None
+
+
+def _warn_enclosed(scenario: Any) -> None:
+    """One line on stderr for each start or goal of the scenario's fixed problems that lies
+    in a region its 2D point clouds enclose."""
+    if scenario.enclosed is None:
+        return
+    for p in scenario.fixed:
+        inside = scenario.enclosed.contains(scenario.robot.positions(np.stack([p.start, p.goal])))
+        for name, q, hit in zip(("start", "goal"), (p.start, p.goal), inside):
+            if hit:
+                what = f"--{name}" if p.tag.endswith("/given") else f"{p.tag}: the {name}"
+                pos = [round(float(x), 4) for x in scenario.robot.positions(q)]
+                print(f"pointplan: warning: {what} {pos} lies in a region the point cloud encloses (inside an obstacle's outline?)", file=sys.stderr)
 
 
 #: planners that take --checkpoint
@@ -265,26 +284,55 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
 
 
 # ---------------------------------------------------------------------------- commands
+def _check_writable(path: str | None, option: str) -> None:
+    """Refuse, in one line, an output file that cannot be written (a directory, a folder
+    that cannot be made or written to), before any planning."""
+    if not path:
+        return
+    target = Path(path)
+    if target.is_dir():
+        raise CLIError(f"{option} {path}: is a directory; give a file name")
+    folder = target.absolute().parent
+    while not folder.exists():  # folders still to make: their nearest existing ancestor decides
+        folder = folder.parent
+    if not folder.is_dir():
+        raise CLIError(f"{option} {path}: cannot write there: {folder} is not a directory")
+    if target.exists():
+        ok = os.access(target, os.W_OK)
+    else:
+        try:  # a trial file in the folder: holds for root and on read-only file systems too
+            with tempfile.NamedTemporaryFile(dir=folder, prefix=".pointplan-"):
+                ok = True
+        except OSError:
+            ok = False
+    if not ok:
+        raise CLIError(f"{option} {path}: cannot write there (permission denied or a read-only file system)")
+
+
 def cmd_eval(args: argparse.Namespace) -> int:
     from .evaluation import evaluate, format_table
 
     names = [n.strip() for n in args.planner.split(",")]
     _check_checkpoint(args, names)
+    _check_writable(args.json, "--json")
     scenario = _scenario(args)
     problems = _test_problems(scenario, args, args.episodes)
     pool = _pool(args)
     results: dict[str, dict[str, Any]] = {}
+    records: dict[str, list[dict[str, Any]]] = {}
     interrupted = None
     for name in names:
         planner = _planner(name, scenario.robot, args, args.seed)
         _say_shipped(name, planner, args)
         report = evaluate(planner, problems, scenario.robot, progress=not args.quiet, pool=pool)
         results[name] = report.metrics()
+        records[name] = [r.to_json() for r in report.records]
         interrupted = report.interrupted
         if interrupted:
             break
     print(format_table(results))
-    payload: dict[str, Any] = dict(next(iter(results.values()))) if len(results) == 1 else {"planners": results}
+    per_planner = {name: {**m, "problems": records[name]} for name, m in results.items()}
+    payload: dict[str, Any] = dict(next(iter(per_planner.values()))) if len(results) == 1 else {"planners": per_planner}
     payload.update({"planner": names[0] if len(names) == 1 else names, "env": scenario.name, "seed": args.seed})
     if interrupted:
         payload["interrupted"] = {"finished": interrupted[0], "problems": interrupted[1]}
@@ -329,7 +377,7 @@ def _demo_pool(workers: int, address: str | None) -> Any:
 def _test_problems(scenario: Any, args: argparse.Namespace, n: int) -> Any:
     """The first ``n`` test problems; on Ray workers a registered scenario's problems
     travel as their recipe and are rebuilt by the workers (the same problems)."""
-    if _workers(args) and not getattr(scenario, "fixed", None) and not getattr(args, "scene", None):
+    if _workers(args) and not getattr(scenario, "fixed", None) and not getattr(args, "scene", None) and not getattr(args, "points", None):
         from .distributed import ScenarioProblems
 
         return ScenarioProblems.of(scenario, "test", n, seed=args.seed)
@@ -340,6 +388,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     from .observers import world_observation
 
     _check_checkpoint(args, [args.planner])
+    _check_writable(args.output, "-o/--output")
+    _check_writable(args.gif, "--gif")
     scenario = _scenario(args)
     problem = scenario.problem("test", args.seed, seed=0)
     result = None
@@ -428,6 +478,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from .evaluation.evaluate import endpoint_fault
 
     _check_checkpoint(args, [args.planner])
+    _check_writable(args.json, "--json")
+    _check_writable(args.output, "-o/--output")
     scenario = _scenario(args)
     if getattr(scenario, "fixed", None):
         problems = scenario.fixed
@@ -446,7 +498,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.output:
         _draw_plan(args, scenario.robot, problems[: len(report.records)], report.records, planner)
     if args.json:
-        paths = [{"tag": r.tag, "success": bool(r.success), "invalid": r.invalid, "path": np.asarray(r.path).tolist()} for r in report.records]
+        paths = [{**r.to_json(), "path": np.asarray(r.path).tolist()} for r in report.records]
         out: dict[str, Any] = {"planner": args.planner, "metrics": report.metrics(), "problems": paths}
         if report.interrupted:
             out["interrupted"] = {"finished": report.interrupted[0], "problems": report.interrupted[1]}
@@ -483,53 +535,111 @@ def _draw_plan(args: argparse.Namespace, robot: Any, problems: Sequence[Any], re
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from .evaluation import evaluate, format_table
-    from .planners import make_planner
+    from .evaluation import format_table
+    from .evaluation.evaluate import EvalReport
 
+    _check_writable(args.output, "-o/--output")
     scenario = _scenario(args)
     robot = scenario.robot
+    if robot.dim == 3:
+        _check_writable(str(Path(args.output).with_suffix(".gif")), "-o/--output (its GIF)")
     episodes = args.episodes or (400 if robot.dim == 2 else 100)
     print(f"{scenario.name} with {robot.name}: {episodes} test problems (workspaces never seen in training)")
     problems = scenario.problems("test", episodes, seed=0)
+    planners = _demo_planners(args, scenario)
+    reports = _demo_evaluate(planners, problems, robot, args.quiet)
+    done = min(len(r.records) for r in reports.values())
+    print(format_table({name: EvalReport(name, r.records[:done]).metrics() for name, r in reports.items()}))
+    not_run = [name for name in planners if name not in reports]
+    if not_run or any(r.interrupted for r in reports.values()):
+        skipped = f" ({', '.join(not_run)} not run)" if not_run else ""
+        print(f"interrupted: the table compares the first {done} of the {len(problems)} problems, which every planner above finished{skipped}; nothing drawn")
+        return 130
+    try:
+        _demo_figures(args, scenario, problems, reports)
+    except KeyboardInterrupt:
+        print("\ninterrupted while drawing", file=sys.stderr)
+        return 130
+    return 0
+
+
+def _demo_planners(args: argparse.Namespace, scenario: Any) -> dict[str, Any]:
+    """The demo's planners: the policy (shipped, or --checkpoint), Bi-RRT and the straight line."""
+    from .planners import make_planner
+
+    robot = scenario.robot
     observation = args.observation if args.checkpoint is None else None
     try:
         policy = make_planner("policy", robot, checkpoint=args.checkpoint or "shipped", observation=observation, scene=scenario.name)
     except ValueError as e:
         raise CLIError(str(e)) from None
     _say_shipped("policy", policy, args)
-    planners = {"policy": policy, "birrt": make_planner("birrt", robot, seed=0, max_nodes=args.max_nodes), "straight": make_planner("straight", robot)}
-    metrics, reports = {}, {}
+    return {"policy": policy, "birrt": make_planner("birrt", robot, seed=0, max_nodes=args.max_nodes), "straight": make_planner("straight", robot)}
+
+
+def _demo_evaluate(planners: dict[str, Any], problems: Sequence[Any], robot: Any, quiet: bool) -> dict[str, Any]:
+    """Each planner's report on ``problems``, one planner after the other; Ctrl-C stops them
+    all (the planner it interrupted has the last report, holding the problems it finished)."""
+    from .evaluation import evaluate
+
+    reports: dict[str, Any] = {}
     for name, planner in planners.items():
-        reports[name] = evaluate(planner, problems, robot, progress=not args.quiet)
-        metrics[name] = reports[name].metrics()
-    print(format_table(metrics))
-    # a few problems the policy solved, drawn with its paths
-    solved = [i for i, r in enumerate(reports["policy"].records) if r.success][: args.figures]
-    if not solved:
+        reports[name] = evaluate(planner, problems, robot, progress=not quiet)
+        if reports[name].interrupted:
+            break
+    return reports
+
+
+def _demo_picks(records: Sequence[Any], n: int) -> list[int]:
+    """The ``n`` problems the policy solved with the most steps (the ones it solved without
+    a step, by the first goal test, only when there are no others), most steps first."""
+    solved = [i for i, r in enumerate(records) if r.success]
+    moved = [i for i in solved if records[i].nodes > 0]
+    return sorted(moved or solved, key=lambda i: -int(records[i].nodes))[:n]
+
+
+def _count(n: int, word: str) -> str:
+    """``"1 step"``, ``"3 steps"``."""
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
+
+
+def _problem_name(problem: Any) -> str:
+    """``test problem 12`` for a problem tagged ``env/test/12/seed0``, else its tag."""
+    parts = str(problem.tag).split("/")
+    return f"{parts[1]} problem {parts[2]}" if len(parts) >= 3 else str(problem.tag)
+
+
+def _demo_figures(args: argparse.Namespace, scenario: Any, problems: Sequence[Any], reports: dict[str, Any]) -> None:
+    """The policy's paths on the problems of :func:`_demo_picks` (in 3D Bi-RRT's below and
+    a GIF), drawn from the evaluation's records."""
+    records = reports["policy"].records
+    picked = _demo_picks(records, args.figures)
+    if not picked:
         print("the policy solved none of these problems: nothing to draw")
-        return 0
-    shown = [problems[i] for i in solved]
-    results = [planners["policy"].plan(p) for p in shown]
+        return
+    shown = [problems[i] for i in picked]
+    policy = [records[i] for i in picked]
+    robot = scenario.robot
     if robot.dim == 2:
         from .viz.plot2d import render_grid
 
-        render_grid(shown, results, args.output, robot, titles=[f"{p.tag.split('/', 1)[-1]}  {r.nodes} steps" for p, r in zip(shown, results)])
+        titles = [f"policy on {scenario.name}, {_problem_name(p)}\n{_count(r.nodes, 'step')}" for p, r in zip(shown, policy)]
+        render_grid(shown, policy, args.output, robot, titles=titles)
         print(f"wrote {args.output}")
-        return 0
-    _demo_figures_3d(args, robot, shown, results, [planners["birrt"].plan(p) for p in shown])
-    return 0
+        return
+    _demo_figures_3d(args, robot, scenario.name, shown, policy, [reports["birrt"].records[i] for i in picked])
 
 
-def _demo_figures_3d(args: argparse.Namespace, robot: Any, shown: list[Any], policy: list[Any], birrt: list[Any]) -> None:
+def _demo_figures_3d(args: argparse.Namespace, robot: Any, env: str, shown: list[Any], policy: list[Any], birrt: list[Any]) -> None:
     """The policy's paths (top row) and Bi-RRT's (bottom row) on the same problems, and a
     GIF of the policy on the first one."""
     from .evaluation.evaluate import timed_path
     from .viz.plot3d import render_grid_3d, render_rollout_gif
 
     shown, policy, birrt = shown[:4], policy[:4], birrt[:4]
-    names = [f"test problem {p.tag.split('/')[2]}" if p.tag.count("/") >= 2 else p.tag for p in shown]
-    titles = [f"policy, {n}: {r.nodes} steps" for n, r in zip(names, policy)]
-    titles += [f"Bi-RRT, {n}: {r.nodes} nodes" for n, r in zip(names, birrt)]
+    names = [_problem_name(p) for p in shown]
+    titles = [f"policy on {env}, {n}: {_count(r.nodes, 'step')}" for n, r in zip(names, policy)]
+    titles += [f"Bi-RRT on {env}, {n}: {_count(r.nodes, 'node')}" for n, r in zip(names, birrt)]
     paths = [r.path for r in policy] + [r.path if r.success else None for r in birrt]
     render_grid_3d(shown + shown, robot, paths, args.output, cols=len(shown), titles=titles)
     print(f"wrote {args.output} (policy above, Bi-RRT below)")
@@ -609,6 +719,25 @@ def _resume_config(args: argparse.Namespace) -> Any:
     return cfg
 
 
+def _run_folder(path: str | Path) -> str:
+    """``--run-dir`` checked before any work (a file in the way, a folder that cannot be
+    written: a one-line error); nothing is created yet."""
+    from .learning.rundir import RunDirError, check_run_dir
+
+    try:
+        check_run_dir(path, create=False)
+    except RunDirError as e:
+        raise CLIError(str(e)) from None
+    return str(path)
+
+
+def _best_line(best: float | None) -> str:
+    """``best validation success 0.850``, or ``no validation yet``."""
+    from .learning.rundir import best_note
+
+    return best_note(best)
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     from .config import given_options, replace_paths
     from .learning.train import TrainConfig, train
@@ -620,6 +749,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         base = TrainConfig(**_learner_fields(args))
         cfg = replace_paths(base, given_options(args, TRAIN_OPTIONS))
         run_dir = args.run_dir or "runs/latest"
+    _run_folder(run_dir)
     scale = _workers(args)
     rollouts = None
     if scale is not None:
@@ -627,7 +757,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
         rollouts = ray_rollouts(*scale, sync_every=args.sync_every)
     res = train(cfg, run_dir, progress=not args.quiet, resume=args.resume, sync_every=args.sync_every, rollouts=rollouts)
-    print(f"best validation success {res.best_success:.3f} after {res.steps} env steps, {res.wall_time_s:.0f} s; checkpoints in {res.run_dir}")
+    if not res.interrupted:  # (an interrupted run has said where it stopped and how to continue)
+        print(f"{_best_line(res.best_success)} after {res.steps} env steps, {res.wall_time_s:.0f} s; checkpoints in {res.run_dir}")
     summary = {
         "run_dir": str(res.run_dir),
         "best_success": res.best_success,
@@ -661,50 +792,83 @@ BC_OPTIONS = {
 
 
 def cmd_bc(args: argparse.Namespace) -> int:
-    from .config import from_dict, given_options, replace_paths
+    from .config import given_options, replace_paths
     from .learning.bc import BCConfig, train_bc
     from .learning.dagger import DaggerConfig, train_dagger
 
     given = {**given_options(args, BC_OPTIONS), "bc.address": args.address}  # (the Ray cluster is this command's)
+    cloning = False  # --resume of a cloning run (not DAgger)
     if args.resume:
-        from .models.checkpoint import load_checkpoint
-
-        data = load_checkpoint(args.resume)
-        if "dagger_config" not in data:
-            raise CLIError(f"--resume {args.resume}: not a DAgger checkpoint; resume from a DAgger run's last.pt")
-        cfg = replace_paths(from_dict(DaggerConfig, data["dagger_config"]), given)
-        if args.dagger_rounds:
-            cfg = dataclasses.replace(cfg, rounds=args.dagger_rounds)
+        cfg, cloning = _bc_resume_config(args, given)
     else:
         bc = BCConfig(**_learner_fields(args))
         cfg = replace_paths(DaggerConfig(bc, rounds=args.dagger_rounds), given)
+    run_dir = _run_folder(args.run_dir or (str(Path(args.resume).parent) if args.resume else "runs/latest"))
     pool = _demo_pool(cfg.bc.workers, cfg.bc.address)
-    if args.dagger_rounds or args.resume:
-        run_dir = args.run_dir or (str(Path(args.resume).parent) if args.resume else "runs/latest")
+    if (args.dagger_rounds or args.resume) and not cloning:
         summary = train_dagger(cfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume, pool=pool)
-    elif cfg.expert.startswith("slot-threading"):
-        from .learning.dagger import first_demos
-        from .scenes.scenarios import make_scenario
-
-        run_dir = Path(args.run_dir or "runs/latest")
-        run_dir.mkdir(parents=True, exist_ok=True)
-        demos = first_demos(cfg, make_scenario(cfg.bc.env, robot=cfg.bc.robot), Path(cfg.bc.demos_file or run_dir / "demos.npz"), not args.quiet)
-        summary = train_bc(cfg.bc, run_dir, progress=not args.quiet, demos=demos)
+    elif cfg.expert.startswith("slot-threading") and not cloning:
+        summary = _bc_slot_threading(cfg, run_dir, not args.quiet)
     else:
-        summary = train_bc(cfg.bc, args.run_dir or "runs/latest", progress=not args.quiet, pool=pool)
-    print(_bc_line(summary))
+        resume = args.resume if cloning else None
+        summary = train_bc(cfg.bc, run_dir, progress=not args.quiet, pool=pool, resume=resume, eval_episodes=cfg.eval_episodes)
+    if not summary.get("interrupted"):  # (an interrupted run has said where it stopped and how to continue)
+        print(_bc_line(summary))
     _write_json(args.json, summary)
-    return 0
+    return 130 if summary.get("interrupted") else 0
+
+
+def _bc_resume_config(args: argparse.Namespace, given: dict[str, Any]) -> tuple[Any, bool]:
+    """The configuration of the run ``bc --resume`` continues (options given replace its
+    own), and whether it is a cloning run (else DAgger)."""
+    from .config import from_dict, replace_paths
+    from .learning.bc import BCConfig
+    from .learning.dagger import DaggerConfig
+    from .models.checkpoint import load_checkpoint
+
+    data = load_checkpoint(args.resume)
+    if "bc_trainer" in data:
+        if args.dagger_rounds:
+            raise CLIError(f"--resume {args.resume}: a cloning run; finish it, then start DAgger from its bc.pt with --init-actor and --dagger-rounds")
+        episodes = int(data["bc_trainer"].get("eval_episodes") or DaggerConfig.eval_episodes)  # (the run's own unless given)
+        return replace_paths(DaggerConfig(from_dict(BCConfig, data["bc_config"]), eval_episodes=episodes), given), True
+    if "dagger_config" not in data or "dagger" not in data:
+        raise CLIError(f"--resume {args.resume}: not the trainer state of a `pointplan bc` run (cloning or DAgger); resume from the run's last.pt")
+    cfg = replace_paths(from_dict(DaggerConfig, data["dagger_config"]), given)
+    if args.dagger_rounds:
+        cfg = dataclasses.replace(cfg, rounds=args.dagger_rounds)
+    return cfg, False
+
+
+def _bc_slot_threading(cfg: Any, run_dir: str, progress: bool) -> dict[str, Any]:
+    """Cloning from demonstrations of the slot threading expert (planned here, kept in
+    ``--demos`` or the run folder's ``demos.npz``)."""
+    from .learning.bc import train_bc
+    from .learning.dagger import first_demos
+    from .learning.rundir import say_interrupted_early
+    from .scenes.scenarios import make_scenario
+
+    Path(run_dir).mkdir(parents=True, exist_ok=True)
+    demos_file = Path(cfg.bc.demos_file or Path(run_dir) / "demos.npz")
+    try:
+        demos = first_demos(cfg, make_scenario(cfg.bc.env, robot=cfg.bc.robot), demos_file, progress)
+    except KeyboardInterrupt:
+        say_interrupted_early("planning the demonstrations")
+        return {"run_dir": run_dir, "interrupted": True, "epochs": 0}
+    bc = dataclasses.replace(cfg.bc, demos_file=str(demos_file))
+    return train_bc(bc, run_dir, progress=progress, demos=demos, eval_episodes=cfg.eval_episodes)
 
 
 def _bc_line(summary: dict[str, Any]) -> str:
     """One line for the summary of ``bc`` (cloning alone, or with DAgger)."""
     if "checkpoint" in summary:  # cloning alone
+        val = summary.get("val_success")
+        validation = f"validation success {val:.3f} on {summary['val_problems']} problems" if val is not None else "no validation yet"
         return (
-            f"cloned {summary['demo_steps']} steps of {summary['demo_problems']} demonstrations, final loss {summary['final_loss']:.4f}, "
+            f"cloned {summary['demo_steps']} steps of {summary['demo_problems']} demonstrations, final loss {summary['final_loss']:.4f}, {validation}, "
             f"{summary['demo_time_s'] + summary['train_time_s']:.0f} s; checkpoint {summary['checkpoint']}"
         )
-    return f"best validation success {summary['best_success']:.3f} with {summary['demo_steps']} demonstration steps, {summary['wall_time_s']:.0f} s; checkpoints in {summary['run_dir']}"
+    return f"{_best_line(summary.get('best_success'))} with {summary['demo_steps']} demonstration steps, {summary['wall_time_s']:.0f} s; checkpoints in {summary['run_dir']}"
 
 
 def _learner_fields(args: argparse.Namespace) -> dict[str, Any]:
@@ -752,32 +916,37 @@ COLLISION_OPTIONS = {
 def cmd_collision_classify(args: argparse.Namespace) -> int:
     from .config import given_options, replace_paths
     from .learning.collision import OBSERVATIONS, CollisionConfig, make_data, train_classifier
+    from .learning.rundir import say_interrupted_early
 
-    names = [n.strip() for n in args.observation.split(",") if n.strip()]
-    unknown = [n for n in names if n not in OBSERVATIONS]
-    if unknown or not names:
-        raise CLIError(f"--observation: expected some of {', '.join(OBSERVATIONS)} (comma-separated), got {args.observation!r}")
-    base = replace_paths(CollisionConfig(observation=names[0]), given_options(args, COLLISION_OPTIONS))
-    run_dir = Path(args.run_dir)
+    if args.resume:
+        base, names = _collision_resume_config(args)
+    else:
+        names = [n.strip() for n in args.observation.split(",") if n.strip()]
+        unknown = [n for n in names if n not in OBSERVATIONS]
+        if unknown or not names:
+            raise CLIError(f"--observation: expected some of {', '.join(OBSERVATIONS)} (comma-separated), got {args.observation!r}")
+        base = replace_paths(CollisionConfig(observation=names[0]), given_options(args, COLLISION_OPTIONS))
+    run_dir = Path(_run_folder(args.run_dir or (Path(args.resume).parent if args.resume else "runs/collision")))
     try:
         samples = make_data(base, progress=not args.quiet)  # the same samples for every representation
     except KeyboardInterrupt:
-        print("\ninterrupted while drawing the samples: nothing trained", file=sys.stderr)
+        say_interrupted_early("drawing the samples")
         return 130
     rows: dict[str, Any] = {}
     interrupted = False
-    for name in names:
+    for i, name in enumerate(names):
         cfg = dataclasses.replace(base, observation=name)
-        res = train_classifier(cfg, run_dir, progress=not args.quiet, samples=samples)
+        resume = args.resume if i == 0 else None
+        res = train_classifier(cfg, run_dir, progress=not args.quiet, samples=samples, resume=resume, queue=names[i + 1 :])
+        if res.interrupted:  # (it has said where it stopped and how to continue)
+            interrupted = True
+            break
         t = res.test
         rows[name] = res.summary(cfg)
         print(
             f"{name:>16}: test accuracy {100 * t['accuracy']:.1f}% (near the boundary {100 * t['accuracy_near']:.1f}%, "
             f"away {100 * t['accuracy_far']:.1f}%), best epoch {res.best_epoch}, train {res.train_time_s:.0f} s"
         )
-        if res.interrupted:
-            interrupted = True
-            break
     if args.figure and not interrupted:
         from .viz.collision import render_collision_errors
 
@@ -787,6 +956,20 @@ def cmd_collision_classify(args: argparse.Namespace) -> int:
         print(f"wrote {args.figure}")
     _write_json(args.json, {"run_dir": str(run_dir), "results": rows, "interrupted": interrupted})
     return 130 if interrupted else 0
+
+
+def _collision_resume_config(args: argparse.Namespace) -> tuple[Any, list[str]]:
+    """The configuration of the classifier ``--resume`` continues (options given replace its
+    own) and the observations to train: that one, then those the run had still to train."""
+    from .config import from_dict, given_options, replace_paths
+    from .learning.collision import CollisionConfig
+    from .models.checkpoint import load_checkpoint
+
+    data = load_checkpoint(args.resume)
+    if "collision_trainer" not in data:
+        raise CLIError(f"--resume {args.resume}: not the trainer state of a `pointplan collision-classify` run; resume from the run's last.pt")
+    cfg = replace_paths(from_dict(CollisionConfig, data["config"]), given_options(args, COLLISION_OPTIONS))
+    return cfg, [cfg.observation, *data["collision_trainer"]["queue"]]
 
 
 #: mpnet-train options derived from MPNetTrainConfig: flag -> field path
@@ -817,19 +1000,30 @@ MPNET_OPTIONS = {
 
 
 def cmd_mpnet_train(args: argparse.Namespace) -> int:
-    from .config import given_options, replace_paths
+    from .config import from_dict, given_options, replace_paths
     from .learning.mpnet import MPNetTrainConfig, train_mpnet
     from .models.mpnet import check_translating
 
-    try:
-        check_translating(_scenario(args).robot)
-    except ValueError as e:
-        raise CLIError(f"mpnet-train: {e}") from None
-    cfg = replace_paths(MPNetTrainConfig(env=args.env, robot=args.robot), given_options(args, MPNET_OPTIONS))
-    res = train_mpnet(cfg, args.run_dir, progress=not args.quiet, pool=_demo_pool(cfg.workers, None))
-    v = res.best_val
+    if args.resume:
+        from .models.checkpoint import load_checkpoint
+
+        data = load_checkpoint(args.resume)
+        if "mpnet_trainer" not in data:
+            raise CLIError(f"--resume {args.resume}: not the trainer state of a `pointplan mpnet-train` run; resume from the run's last.pt")
+        cfg = replace_paths(from_dict(MPNetTrainConfig, data["train_config"]), given_options(args, MPNET_OPTIONS))
+    else:
+        try:
+            check_translating(_scenario(args).robot)
+        except ValueError as e:
+            raise CLIError(f"mpnet-train: {e}") from None
+        cfg = replace_paths(MPNetTrainConfig(env=args.env, robot=args.robot), given_options(args, MPNET_OPTIONS))
+    run_dir = _run_folder(args.run_dir or (Path(args.resume).parent if args.resume else "runs/mpnet"))
+    res = train_mpnet(cfg, run_dir, progress=not args.quiet, pool=_demo_pool(cfg.workers, None), resume=args.resume)
+    if res.interrupted:  # (it has said where it stopped and how to continue)
+        _write_json(args.json, {"run_dir": str(res.run_dir), "best_epoch": res.best_epoch, "best_val": res.best_val, "interrupted": True})
+        return 130
     print(
-        f"best validation success {v.get('val_success', float('nan')):.3f} at epoch {res.best_epoch} "
+        f"{_best_line(res.best_val.get('val_success'))} at epoch {res.best_epoch} "
         f"(demonstrations {res.demo_time_s:.0f} s, training {res.train_time_s:.0f} s); checkpoints in {res.run_dir}"
     )
     for name, m in res.test.items():
@@ -868,18 +1062,28 @@ LSAMPLE_OPTIONS = {
 
 
 def cmd_lsample_train(args: argparse.Namespace) -> int:
-    from .config import given_options, replace_paths
+    from .config import from_dict, given_options, replace_paths
     from .learning.lsample import LSampleConfig, train_lsample
 
-    cfg = replace_paths(LSampleConfig(), given_options(args, LSAMPLE_OPTIONS))
-    summary = train_lsample(cfg, args.run_dir, progress=not args.quiet, pool=_demo_pool(cfg.workers, None))
-    best = summary["best_val_nodes_0.9"]
-    print(
-        f"trained on {summary['train_configs']} configurations of {summary['train_problems']} Bi-RRT solutions, {summary['epochs']} epochs, "
-        f"{summary['train_time_s']:.0f} s (data {summary['data_time_s']:.0f} s); best epoch {summary['best_epoch']}"
-        + (f" ({best:.1f} mean nodes at lambda 0.9 on validation problems)" if best is not None else "")
-        + f"; checkpoints in {summary['run_dir']}"
-    )
+    if args.resume:
+        from .models.checkpoint import load_checkpoint
+
+        data = load_checkpoint(args.resume)
+        if "lsample_trainer" not in data:
+            raise CLIError(f"--resume {args.resume}: not the trainer state of a `pointplan lsample-train` run; resume from the run's last.pt")
+        cfg = replace_paths(from_dict(LSampleConfig, data["lsample_config"]), given_options(args, LSAMPLE_OPTIONS))
+    else:
+        cfg = replace_paths(LSampleConfig(), given_options(args, LSAMPLE_OPTIONS))
+    run_dir = _run_folder(args.run_dir or (Path(args.resume).parent if args.resume else "runs/lsample"))
+    summary = train_lsample(cfg, run_dir, progress=not args.quiet, pool=_demo_pool(cfg.workers, None), resume=args.resume)
+    if not summary["interrupted"]:  # (an interrupted run has said where it stopped and how to continue)
+        best = summary["best_val_nodes_0.9"]
+        print(
+            f"trained on {summary['train_configs']} configurations of {summary['train_problems']} Bi-RRT solutions, {summary['epochs']} epochs, "
+            f"{summary['train_time_s']:.0f} s (data {summary['data_time_s']:.0f} s); best epoch {summary['best_epoch']}"
+            + (f" ({best:.1f} mean nodes at lambda 0.9 on validation problems)" if best is not None else " (no planning validation)")
+            + f"; checkpoints in {summary['run_dir']}"
+        )
     _write_json(args.json, summary)
     return 130 if summary["interrupted"] else 0
 
@@ -943,10 +1147,11 @@ def cmd_ppo(args: argparse.Namespace) -> int:
             raise CLIError("--init-actor is required: PPO fine-tunes a policy checkpoint (e.g. runs/bc/bc.pt from `pointplan bc`, or a shipped one)")
         cfg = replace_paths(PPOConfig(), given)
         run_dir = args.run_dir or "runs/ppo"
-    summary = train_ppo(cfg, run_dir, resume=args.resume, progress=not args.quiet)
-    print(
-        f"best validation success {summary['best_success']:.3f} after {summary['steps']} env steps, {summary['wall_time_s']:.0f} s; checkpoints in {summary['run_dir']}"
-    )
+    summary = train_ppo(cfg, _run_folder(run_dir), resume=args.resume, progress=not args.quiet)
+    if not summary["interrupted"]:
+        steps = summary["steps"]
+        rounded = f" (--steps {cfg.total_steps} rounded up to a multiple of --num-envs {cfg.num_envs})" if steps > cfg.total_steps else ""
+        print(f"{_best_line(summary['best_success'])} after {steps} env steps{rounded}, {summary['wall_time_s']:.0f} s; checkpoints in {summary['run_dir']}")
     _write_json(args.json, summary)
     return 130 if summary["interrupted"] else 0
 
@@ -1049,11 +1254,16 @@ def _add_plan_parser(sub: Any) -> None:
     )
     p.add_argument(
         "--bounds",
-        help="with --points: the workspace as low then high, e.g. 0,0,1,1; write --bounds=-1,... when the first number is negative (default: the cloud's box grown by 10%% of its largest side)",
+        help="with --points: the workspace as low then high, e.g. 0,0,1,1; write --bounds=-1,... when the first number is negative (default: the box of the cloud, --start and --goal grown by 10%% of its largest side)",
     )
     p.add_argument("--start", help="plan this start (with --goal) instead of the scene's problems, e.g. 0.1,0.1")
     p.add_argument("--goal", help="the goal of --start, e.g. 0.9,0.9 (an S-shape takes x,y,z or x,y,z,qx,qy,qz,qw)")
-    p.add_argument("--episodes", type=positive_int, default=10, help="problems to draw when the scene file has none (default: %(default)s)")
+    p.add_argument(
+        "--episodes",
+        type=positive_int,
+        default=10,
+        help="problems to draw when the scene file has none; in 2D, starts and goals in regions a point cloud encloses (inside a scanned outline) are drawn again, in 3D they are not checked (default: %(default)s)",
+    )
     p.add_argument("-o", "--output", help="draw the problems and their paths to this PNG (a grid when there are several)")
     p.add_argument("--json", help="write metrics and paths to this file")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -1096,7 +1306,9 @@ def _add_bc_parser(sub: Any) -> None:
         help="DAgger rounds after cloning: the policy's failed rollouts labelled by Bi-RRT (default: 0, off)",
     )
     p.add_argument("--init-actor", help="DAgger: start from this checkpoint's actor instead of cloning first")
-    p.add_argument("--resume", help="DAgger: continue a run from its last.pt (--dagger-rounds sets the new total; options given replace the run's own)")
+    p.add_argument(
+        "--resume", help="continue a cloning or DAgger run from its last.pt (DAgger: --dagger-rounds sets the new total); options given replace the run's own"
+    )
     p.add_argument("--json", help="also write the summary to this JSON file")
     p.set_defaults(func=cmd_bc)
 
@@ -1127,8 +1339,10 @@ def _add_collision_parser(sub: Any) -> None:
     )
     add_config_options(p, CollisionConfig(), COLLISION_OPTIONS)
     p.add_argument(
-        "--run-dir", default="runs/collision", help="where the classifiers (<observation>.pt), summaries and test predictions go (default: %(default)s)"
+        "--run-dir",
+        help="where the classifiers (<observation>.pt), summaries and test predictions go (default: runs/collision; with --resume the checkpoint's folder)",
     )
+    p.add_argument("--resume", help="continue an interrupted run from its last.pt, then the observations it had still to train; options given replace its own")
     p.add_argument("--figure", help="draw where each classifier is wrong (a PNG) after training")
     p.add_argument("--json", help="write the results here")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -1149,7 +1363,8 @@ def _add_mpnet_parser(sub: Any) -> None:
     )
     p.add_argument("--robot", help="sphere3d for the 3D scenarios (the default there; MPNet plans translating robots only, not sshape)")
     add_config_options(p, MPNetTrainConfig(), MPNET_OPTIONS)
-    p.add_argument("--run-dir", default="runs/mpnet", help="where checkpoints and logs go (default: %(default)s)")
+    p.add_argument("--run-dir", help="where checkpoints and logs go (default: runs/mpnet; with --resume the checkpoint's folder)")
+    p.add_argument("--resume", help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own")
     p.add_argument("--json", help="also write the summary to this JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_mpnet_train)
@@ -1165,7 +1380,8 @@ def _add_lsample_parser(sub: Any) -> None:
         "train the learned sampler of --planner lsample-0.5 / lsample-0.9 (Ichter et al. 2018): a conditional VAE on configurations of Bi-RRT solutions of training problems",
     )
     add_config_options(p, LSampleConfig(), LSAMPLE_OPTIONS)
-    p.add_argument("--run-dir", default="runs/lsample", help="where best.pt, last.pt and metrics.csv go (default: %(default)s)")
+    p.add_argument("--run-dir", help="where best.pt, last.pt and metrics.csv go (default: runs/lsample; with --resume the checkpoint's folder)")
+    p.add_argument("--resume", help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own")
     p.add_argument("--json", help="also write the summary to this JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_lsample_train)

@@ -34,7 +34,7 @@ from collections.abc import Callable
 from typing import Any
 
 from .evaluation import ScenarioProblems, evaluate_parallel
-from .tasks import RAY_MISSING, TASK_RETRIES, Interrupted, RayMissing, RayPool, cluster_cpus, connect, map_ordered, ray_available, wants_ray
+from .tasks import RAY_MISSING, TASK_RETRIES, Interrupted, NoCluster, RayMissing, RayPool, cluster_cpus, connect, map_ordered, ray_available, wants_ray
 
 
 class RayBackend:
@@ -56,6 +56,7 @@ __all__ = [
     "RAY_MISSING",
     "TASK_RETRIES",
     "Interrupted",
+    "NoCluster",
     "RayBackend",
     "RayMissing",
     "RayPool",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import math
 import os
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
@@ -32,12 +33,21 @@ class RayMissing(RuntimeError):
         super().__init__(RAY_MISSING)
 
 
+class NoCluster(RuntimeError):
+    """No Ray cluster answers at the address given (a one-line message for the user)."""
+
+    def __init__(self, address: str) -> None:
+        super().__init__(f"no Ray cluster at {address}: start one with `ray start --head`, or leave out --address")
+        self.address = address
+
+
 def connect(workers: int | None = None, address: str | None = None) -> Any:
     """Start (or join) Ray and return the ``ray`` module.
 
     ``address``: an existing cluster (``auto``, ``ray://host:10001`` or ``host:6379``);
     otherwise a local Ray with ``workers`` CPUs (default: all of this machine's). An
-    already running Ray in this process is reused."""
+    already running Ray in this process is reused. Raises :class:`NoCluster` when no
+    cluster answers at ``address``."""
     if not ray_available():
         raise RayMissing()
     import ray
@@ -50,7 +60,12 @@ def connect(workers: int | None = None, address: str | None = None) -> Any:
     kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": "warning", "log_to_driver": True}
     if address:
         # the cluster's nodes must have pointplan installed (docs/scaling.md)
-        ray.init(address=address, **kwargs)
+        try:
+            with warnings.catch_warnings():  # the client's own warning says what NoCluster says
+                warnings.filterwarnings("ignore", message="Ray Client connection timed out")
+                ray.init(address=address, **kwargs)
+        except (ConnectionError, TimeoutError) as e:
+            raise NoCluster(address) from e
     else:
         # Ray runs its workers at niceness 15 by default, below every other job of a shared
         # machine; the workers of a local Ray do this command's work, so they run at its

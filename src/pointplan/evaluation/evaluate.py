@@ -160,6 +160,24 @@ class EpisodeRecord:
     path: Array = field(repr=False)
     #: why the problem cannot be solved as posed ("start in collision", ...), or ""
     invalid: str = ""
+    #: the problem's start and goal configurations
+    start: Array | None = field(default=None, repr=False)
+    goal: Array | None = field(default=None, repr=False)
+
+    def to_json(self) -> dict[str, Any]:
+        """The record as JSON values: tag, start, goal, verdicts and counts (no path or
+        time; a NaN path length is None)."""
+        return {
+            "tag": self.tag,
+            "start": None if self.start is None else np.asarray(self.start, np.float64).tolist(),
+            "goal": None if self.goal is None else np.asarray(self.goal, np.float64).tolist(),
+            "success": bool(self.success),
+            "claimed_success": bool(self.claimed_success),
+            "invalid": self.invalid,
+            "nodes": int(self.nodes),
+            "collision_checks": int(self.collision_checks),
+            "path_length": None if math.isnan(self.path_length) else float(self.path_length),
+        }
 
 
 def _mean(xs: Sequence[float]) -> float:
@@ -329,6 +347,8 @@ def plan_and_check(planner: Any, problem: Problem, robot: Robot, resolution: flo
         path_length=path_length(robot, path) + float(robot.distance(path[-1], problem.goal)) if ok else math.nan,
         time_s=elapsed,
         path=path,
+        start=np.asarray(problem.start, np.float64).copy(),
+        goal=np.asarray(problem.goal, np.float64).copy(),
     )
 
 

@@ -67,6 +67,68 @@ def _sphere_surface(s: Sphere, spacing: float) -> tuple[Array, Array]:
     return s.center + s.radius * nn, nn
 
 
+def _axis_frame(axis: Array) -> Array:
+    """A rotation whose third column is ``axis`` (normalised; +z for a zero axis)."""
+    n = float(np.linalg.norm(axis))
+    z = axis / n if n > 0 else np.array([0.0, 0.0, 1.0])
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z], 1)
+
+
+def _capsule_outline_2d(cap: Capsule, spacing: float) -> tuple[Array, Array]:
+    """Points about ``spacing`` apart (cell centres) on the boundary of a 2D capsule: its two
+    straight sides and the half circles around ``a`` and ``b``."""
+    axis = cap.b - cap.a
+    length = float(np.linalg.norm(axis))
+    if length < 1e-12:
+        return _sphere_surface(Sphere(cap.a, cap.radius), spacing)
+    u = axis / length
+    theta = float(np.arctan2(u[1], u[0]))
+    n_side = max(1, int(np.floor(length / spacing)))
+    t = (np.arange(n_side) + 0.5) / n_side * length
+    pts, nrm = [], []
+    for sign in (-1.0, 1.0):
+        side = sign * np.array([-u[1], u[0]])
+        pts.append(cap.a + t[:, None] * u + cap.radius * side)
+        nrm.append(np.broadcast_to(side, (n_side, 2)))
+    n_arc = max(4, int(np.ceil(np.pi * cap.radius / spacing)))
+    angles = (np.arange(n_arc) + 0.5) / n_arc * np.pi - np.pi / 2
+    for end, offset in ((cap.b, 0.0), (cap.a, np.pi)):
+        a = theta + offset + angles
+        nn = np.stack([np.cos(a), np.sin(a)], 1)
+        pts.append(end + cap.radius * nn)
+        nrm.append(nn)
+    return np.concatenate(pts), np.concatenate(nrm)
+
+
+def _capsule_surface_3d(cap: Capsule, spacing: float) -> tuple[Array, Array]:
+    """Points about ``spacing`` apart on a 3D capsule: a grid of cell centres on the
+    cylindrical side and a Fibonacci lattice split between the two half spheres."""
+    axis = cap.b - cap.a
+    length = float(np.linalg.norm(axis))
+    frame = _axis_frame(axis)
+    r = cap.radius
+    n_ring = max(8, int(np.ceil(2 * np.pi * r / spacing)))
+    n_along = int(np.floor(length / spacing))
+    ang = (np.arange(n_ring) + 0.5) / n_ring * 2 * np.pi
+    zs = (np.arange(n_along) + 0.5) / max(n_along, 1) * length
+    ga, gz = np.meshgrid(ang, zs, indexing="ij")
+    side = np.stack([np.cos(ga.ravel()), np.sin(ga.ravel()), np.zeros(ga.size)], 1)
+    side_p = r * side + gz.ravel()[:, None] * np.array([0.0, 0.0, 1.0])
+    ball = fibonacci_sphere(max(16, int(np.ceil(4 * np.pi * r**2 / spacing**2))))
+    ball_p = r * ball + np.where(ball[:, 2:] > 0, length, 0.0) * np.array([0.0, 0.0, 1.0])
+    local_p, local_n = np.concatenate([side_p, ball_p]), np.concatenate([side, ball])
+    return local_p @ frame.T + cap.a, local_n @ frame.T
+
+
+def capsule_surface(cap: Capsule, spacing: float) -> tuple[Array, Array]:
+    """Points about ``spacing`` apart on the boundary of a capsule (2D or 3D), with
+    outward normals."""
+    return _capsule_outline_2d(cap, spacing) if cap.dim == 2 else _capsule_surface_3d(cap, spacing)
+
+
 def fibonacci_sphere(n: int) -> Array:
     """``n`` nearly uniform unit vectors on the sphere (a Fibonacci lattice)."""
     i = np.arange(n) + 0.5
@@ -87,6 +149,8 @@ def surface_points(shapes: Sequence[Shape], spacing: float, low: Array | None = 
             p, n = _box_edges_2d(s, spacing) if s.dim == 2 else _box_faces_3d(s, spacing)
         elif isinstance(s, Sphere):
             p, n = _sphere_surface(s, spacing)
+        elif isinstance(s, Capsule):
+            p, n = capsule_surface(s, spacing)
         elif isinstance(s, PointCloud):
             p, n = s.points, s.normals
         else:
@@ -115,10 +179,19 @@ def _inside_other(p: Array, owner: NDArray[np.int64], shapes: Sequence[Shape], e
             hit = np.all(np.abs(local) < s.half - eps, axis=1)
         elif isinstance(s, Sphere):
             hit = np.linalg.norm(p - s.center, axis=1) < s.radius - eps
+        elif isinstance(s, Capsule):
+            hit = _capsule_sqdist(p, s) < (s.radius - eps) ** 2
         else:
             continue
         inside |= hit & (owner != k)
     return inside
+
+
+def _capsule_sqdist(p: Array, cap: Capsule) -> Array:
+    """Squared distance from points ``(N, d)`` to a capsule's segment ``a -> b``."""
+    from .collision import point_segment_sqdist
+
+    return np.asarray(point_segment_sqdist(p, cap.a[None], cap.b[None])[:, 0])
 
 
 def interior_points(shapes: Sequence[Shape], spacing: float, low: Array, high: Array) -> Array:
@@ -132,6 +205,8 @@ def interior_points(shapes: Sequence[Shape], spacing: float, low: Array, high: A
             inside |= np.all(np.abs((grid - s.center) @ s.rotation) <= s.half, axis=1)
         elif isinstance(s, Sphere):
             inside |= np.linalg.norm(grid - s.center, axis=1) <= s.radius
+        elif isinstance(s, Capsule):
+            inside |= _capsule_sqdist(grid, s) <= s.radius**2
         else:
             raise NotImplementedError(f"interior sampling of {type(s).__name__} is not implemented yet")
     return grid[inside]

@@ -8,8 +8,10 @@ The actor's mean action (after the tanh) is fitted to it with an L2 loss.
 
 from __future__ import annotations
 
+import signal
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,7 +21,7 @@ import torch
 
 from ..envs.core import EnvConfig
 from ..models.actor_critic import Actor, NetConfig
-from ..models.checkpoint import save_checkpoint, to_dict
+from ..models.checkpoint import to_dict
 from ..models.encoders import EncoderConfig
 from ..models.inputs import goal_input, obs_input
 from ..observers import make_observer
@@ -27,6 +29,7 @@ from ..parallel import Interrupted, backend, wants_workers
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Problem
+from .rundir import RunDir, load_trainer_state, say_interrupted_early
 
 
 @dataclass
@@ -97,7 +100,9 @@ def _plan_demo(job: DemoJob) -> tuple[int, np.ndarray | None]:
 
 
 def _single_thread() -> None:
+    """A planning worker process: one thread; Ctrl-C is the main process's to handle."""
     torch.set_num_threads(1)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def demo_pool(workers: int, address: str | None = None) -> Any:
@@ -185,7 +190,7 @@ def generate_demos(
         paths = plan_demos(jobs, pool, progress)
     finally:
         if own and pool is not None:
-            pool.shutdown()
+            pool.shutdown(cancel_futures=True)  # (after Ctrl-C: the jobs not started are dropped)
     return demos_from_paths(scenario, split, seed, paths)
 
 
@@ -343,51 +348,134 @@ class BCConfig:
     expert_margin: float = field(default=0.0, metadata={"min": 0})
 
 
-def train_bc(cfg: BCConfig, run_dir: str | Path, progress: bool = True, demos: Demos | None = None, pool: Any = None) -> dict[str, Any]:
-    """Fit the actor to demonstrations; saves ``run_dir/bc.pt``. Returns a summary. ``pool``:
-    where to plan the demonstrations (see :func:`generate_demos`)."""
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+def train_bc(
+    cfg: BCConfig,
+    run_dir: str | Path,
+    progress: bool = True,
+    demos: Demos | None = None,
+    pool: Any = None,
+    resume: str | Path | None = None,
+    eval_episodes: int = 0,
+) -> dict[str, Any]:
+    """Fit the actor to demonstrations; saves the policy as ``run_dir/bc.pt``, the trainer
+    state as ``last.pt`` (also on Ctrl-C; ``resume`` continues from it), the loss of every
+    epoch in ``metrics.csv`` and demonstrations planned here in ``demos.npz`` (or
+    ``cfg.demos_file``). With ``eval_episodes`` the clone is rolled out on that many
+    validation problems at the end. Returns a summary. ``pool``: where to plan the
+    demonstrations (see :func:`generate_demos`)."""
+    folder = RunDir(run_dir, "pointplan bc")
+    ckpt = load_trainer_state(resume, "bc_trainer", "pointplan bc", cfg.device) if resume is not None else None
+    state = ckpt["bc_trainer"] if ckpt is not None else None
     scenario = make_scenario(cfg.env, robot=cfg.robot)
     robot = scenario.robot
     env = EnvConfig(observation=cfg.observation, n_points=cfg.n_points)
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     t0 = time.perf_counter()
-    if demos is None and cfg.demos_file and Path(cfg.demos_file).exists():
+    try:
+        demos, demos_file = _bc_demos(cfg, scenario, folder, progress, demos, pool, state)
+    except KeyboardInterrupt:
+        say_interrupted_early("planning the demonstrations")
+        return {"run_dir": str(folder.path), "interrupted": True, "epochs": 0}
+    t_demos = time.perf_counter() - t0
+    obs_shape = observation_shape(robot, env)
+    actor = Actor(obs_shape, robot.twist_dim, robot.twist_dim, cfg.net).to(torch.device(cfg.device))
+    opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr)
+    losses, wall_before = _restore_bc(ckpt, actor, opt, rng) if ckpt is not None else ([], 0.0)
+    if len(losses) >= cfg.epochs:
+        raise ValueError(f"{resume}: the run has done its {len(losses)} epochs; give --epochs above that to continue it")
+    if ckpt is not None:
+        folder.metrics.drop_after(len(losses))
+    val = None
+    with folder.ctrl_c() as stop:
+        fit_actor(actor, opt, demos, robot, env, cfg.epochs, cfg.batch_size, rng, cfg.refresh_every, progress, cfg.spread_weight, losses, stop, folder.log)
+        if len(losses) == cfg.epochs and eval_episodes:
+            val = validate_actor(actor, scenario, env, eval_episodes, cfg.seed, cfg.device)
+    train_time = wall_before + time.perf_counter() - t0 - t_demos
+    payload = {**policy_payload(cfg, robot.name, obs_shape, actor, scenario.horizon), "bc_config": to_dict(cfg), "demo_steps": len(demos)}
+    trainer = {
+        "epochs": len(losses),
+        "losses": list(losses),
+        "optimizer": opt.state_dict(),
+        "demos": demos_file,
+        "wall_time_s": train_time,
+        "eval_episodes": eval_episodes,
+    }
+    save_last = lambda: folder.save("last.pt", {**payload, "bc_trainer": {**trainer, "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}})
+    summary = {"run_dir": str(folder.path), "demo_steps": len(demos), "demo_problems": len(demos.problems), "epochs": len(losses), "interrupted": False}
+    if len(losses) < cfg.epochs:
+        folder.interrupted(f"in epoch {len(losses) + 1} of {cfg.epochs}", save_last)
+        folder.close()
+        return {**summary, "interrupted": True}
+    folder.save("bc.pt", {**payload, **({"val_success": val} if val is not None else {})})
+    save_last()
+    folder.close()
+    return {
+        **summary,
+        "checkpoint": str(folder.path / "bc.pt"),
+        "demo_time_s": t_demos,
+        "train_time_s": train_time,
+        "final_loss": losses[-1],
+        "val_success": val,
+        "val_problems": eval_episodes if val is not None else 0,
+    }
+
+
+def _bc_demos(
+    cfg: BCConfig, scenario: Scenario, folder: RunDir, progress: bool, demos: Demos | None, pool: Any, state: dict[str, Any] | None
+) -> tuple[Demos, str | None]:
+    """The demonstrations of a cloning run and the file that keeps them (None: given, not
+    kept): a resumed run's own, ``cfg.demos_file`` when it exists, else planned and written
+    to ``cfg.demos_file`` or the run folder's ``demos.npz``."""
+    if demos is not None:
+        return demos, cfg.demos_file
+    kept = state.get("demos") if state is not None else None
+    if kept and Path(kept).exists():
+        return load_demos(kept, scenario), str(kept)
+    if cfg.demos_file and Path(cfg.demos_file).exists():
         demos = load_demos(cfg.demos_file, scenario)
         if progress and len(demos.problems) != cfg.n_problems:
             print(f"{cfg.demos_file}: all its {len(demos.problems)} demonstrations are used (--problems {cfg.n_problems} counts only problems to plan)")
-    if demos is None:
-        demos = generate_demos(
-            scenario,
-            cfg.n_problems,
-            cfg.seed,
-            progress=progress,
-            workers=cfg.workers,
-            address=cfg.address,
-            attempts=cfg.expert_attempts,
-            margin=cfg.expert_margin,
-            pool=pool,
-        )
-        if cfg.demos_file:
-            save_demos(cfg.demos_file, scenario, demos, "train", cfg.seed)
-    t_demos = time.perf_counter() - t0
-    obs_shape = observation_shape(robot, env)
-    device = torch.device(cfg.device)
-    actor = Actor(obs_shape, robot.twist_dim, robot.twist_dim, cfg.net).to(device)
-    opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr)
-    losses = fit_actor(actor, opt, demos, robot, env, cfg.epochs, cfg.batch_size, rng, cfg.refresh_every, progress, cfg.spread_weight)
-    payload = policy_payload(cfg, robot.name, obs_shape, actor, scenario.horizon)
-    save_checkpoint(run_dir / "bc.pt", {**payload, "bc_config": to_dict(cfg), "demo_steps": len(demos)})
-    return {
-        "checkpoint": str(run_dir / "bc.pt"),
-        "demo_steps": len(demos),
-        "demo_problems": len(demos.problems),
-        "demo_time_s": t_demos,
-        "train_time_s": time.perf_counter() - t0 - t_demos,
-        "final_loss": losses[-1] if losses else float("nan"),
-    }
+        return demos, cfg.demos_file
+    demos = generate_demos(
+        scenario,
+        cfg.n_problems,
+        cfg.seed,
+        progress=progress,
+        workers=cfg.workers,
+        address=cfg.address,
+        attempts=cfg.expert_attempts,
+        margin=cfg.expert_margin,
+        pool=pool,
+    )
+    path = cfg.demos_file or str(folder.path / "demos.npz")
+    save_demos(path, scenario, demos, "train", cfg.seed)
+    return demos, path
+
+
+def _restore_bc(ckpt: dict[str, Any], actor: Actor, opt: torch.optim.Optimizer, rng: np.random.Generator) -> tuple[list[float], float]:
+    """Load a cloning run's ``last.pt``; returns the losses of its epochs and its training time."""
+    actor.load_state_dict(ckpt["actor"])
+    state = ckpt["bc_trainer"]
+    opt.load_state_dict(state["optimizer"])
+    rng.bit_generator.state = state["rng"]
+    torch.set_rng_state(state["torch_rng"])
+    return [float(x) for x in state["losses"]], float(state["wall_time_s"])
+
+
+def validate_actor(actor: Actor, scenario: Scenario, env: EnvConfig, episodes: int, seed: int, device: str = "cpu") -> float:
+    """Success rate of the actor's mean action on the first ``episodes`` validation problems
+    (the rollout engine, as training validation does)."""
+    from ..models.policy import Policy
+    from ..planners.rollout import rollout_batch
+
+    policy = Policy(actor, scenario.robot, {"observation": env.observation, "n_points": env.n_points}, device)
+    problems = scenario.problems("val", episodes, seed=seed)
+    res = rollout_batch(
+        policy, scenario.robot, EnvConfig(observation=env.observation, n_points=env.n_points, split="val"), problems, scenario.horizon, seed=seed
+    )
+    actor.train()
+    return float(np.mean([r.success for r in res]))
 
 
 def policy_payload(cfg: BCConfig, robot: str, obs_shape: tuple[int, ...], actor: Actor, horizon: int) -> dict[str, Any]:
@@ -430,27 +518,34 @@ def fit_actor(
     refresh_every: int = 5,
     progress: bool = True,
     spread_weight: float = 0.0,
+    done: list[float] | None = None,
+    stop: Callable[[], bool] | None = None,
+    on_epoch: Callable[[dict[str, float]], None] | None = None,
 ) -> list[float]:
     """Fit the actor's mean action to the demonstrations (L2) for ``epochs`` passes (a
     fraction runs part of one); new observation subsets every ``refresh_every`` epochs.
     With ``spread_weight`` the log-std is fitted too (:func:`spread_loss`). Returns the
-    mean L2 loss of each pass."""
+    mean L2 loss of each pass. ``done``: the losses of passes made before (the fit goes on
+    after them, appending to that list); ``stop``: asked after every gradient step, ends
+    the fit with the current pass unfinished (and not counted); ``on_epoch``: called with
+    ``{"epoch", "loss"}`` after each pass."""
     device = next(actor.parameters()).device
     act = torch.as_tensor(demos.action, device=device)
     g_all = torch.as_tensor(goal_input(robot, demos.q, demos.goal), device=device)
-    losses: list[float] = []
-    passes = range(int(np.ceil(epochs)))
+    losses: list[float] = done if done is not None else []
+    total_passes = int(np.ceil(epochs))
+    passes: Any = range(len(losses), total_passes)
     if progress:
         from tqdm import tqdm
 
-        passes = tqdm(passes, desc="behavioural cloning", unit="epoch")
+        passes = tqdm(passes, desc="behavioural cloning", unit="epoch", total=total_passes, initial=len(losses))
     obs = None
     for ep in passes:
         if obs is None or (refresh_every and ep % refresh_every == 0):
             obs = torch.as_tensor(obs_input(robot, observe_demos(demos, robot, env, rng)), device=device)
         n = len(demos) if ep + 1 <= epochs else int(len(demos) * (epochs - ep))
         perm = torch.as_tensor(rng.permutation(len(demos))[:n], device=device)
-        total = 0.0
+        total, stopped = 0.0, False
         for s in range(0, len(perm), batch_size):
             b = perm[s : s + batch_size]
             mean, log_std = actor(obs[b], g_all[b])
@@ -460,7 +555,16 @@ def fit_actor(
             full.backward()
             opt.step()
             total += float(loss.detach()) * len(b)
+            stopped = stop is not None and stop()
+            if stopped:
+                break
+        if stopped:
+            break
         losses.append(total / max(len(perm), 1))
+        if on_epoch is not None:
+            on_epoch({"epoch": len(losses), "loss": losses[-1]})
         if progress:
-            passes.set_postfix(loss=f"{losses[-1]:.4f}")  # type: ignore[attr-defined]
+            passes.set_postfix(loss=f"{losses[-1]:.4f}")
+    if progress:
+        passes.close()
     return losses

@@ -27,9 +27,8 @@ epoch with the best validation accuracy is kept and evaluated once on the test s
 
 from __future__ import annotations
 
-import json
-import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -47,6 +46,7 @@ from ..observers import make_observer
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Scene
+from .rundir import CtrlC, RunDir, atomic_write, load_trainer_state
 
 Array = NDArray[np.float64]
 
@@ -427,116 +427,180 @@ class CollisionResult:
         }
 
 
+@dataclass
+class _Fit:
+    """A classifier being trained: network, optimiser, random stream and counters."""
+
+    model: CollisionClassifier
+    opt: torch.optim.Optimizer
+    rng: np.random.Generator
+    epoch: int = 0
+    history: list[dict[str, float]] = field(default_factory=list)
+    best_acc: float = -1.0
+    best_epoch: int = 0
+    best_state: dict[str, torch.Tensor] | None = None
+    train_before: float = 0.0
+
+    def state(self, cfg: CollisionConfig, obs_shape: list[int], queue: Sequence[str], train_time: float) -> dict[str, Any]:
+        """``last.pt``: the classifier (as :func:`save_classifier` keeps it) and the trainer state."""
+        trainer = {
+            "epoch": self.epoch,
+            "optimizer": self.opt.state_dict(),
+            "rng": self.rng.bit_generator.state,
+            "torch_rng": torch.get_rng_state(),
+            "history": [dict(r) for r in self.history],
+            "best_acc": self.best_acc,
+            "best_epoch": self.best_epoch,
+            "best_model": self.best_state,
+            "train_time_s": train_time,
+            "queue": list(queue),
+        }
+        return {"config": to_dict(cfg), "obs_shape": obs_shape, "model": self.model.state_dict(), "collision_trainer": trainer}
+
+    def resume(self, path: str | Path) -> None:
+        state = load_trainer_state(path, "collision_trainer", "pointplan collision-classify")
+        self.model.load_state_dict(state["model"])
+        t = state["collision_trainer"]
+        self.opt.load_state_dict(t["optimizer"])
+        self.rng.bit_generator.state = t["rng"]
+        torch.set_rng_state(t["torch_rng"])
+        self.epoch, self.best_acc, self.best_epoch = int(t["epoch"]), float(t["best_acc"]), int(t["best_epoch"])
+        self.history, self.best_state, self.train_before = [dict(r) for r in t["history"]], t["best_model"], float(t["train_time_s"])
+
+
+def _train_epoch(fit: _Fit, tr: SplitData, cfg: CollisionConfig, bar: Any, stop: Callable[[], bool]) -> float | None:
+    """One pass over the training samples: the mean loss, or None when ``stop`` ended it early."""
+    model, device = fit.model, next(fit.model.parameters()).device
+    loss_fn = nn.BCEWithLogitsLoss()
+    model.train()
+    n = len(tr.label)
+    perm = torch.as_tensor(fit.rng.permutation(n))
+    total, seen = 0.0, 0
+    for s in range(0, n, cfg.batch_size):
+        b = perm[s : s + cfg.batch_size]
+        loss = loss_fn(model(tr.obs[b].to(device, torch.float32), tr.action[b].to(device)), tr.label[b].to(device))
+        fit.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        fit.opt.step()
+        total += float(loss.detach()) * len(b)
+        seen += len(b)
+        if bar is not None:
+            bar.update()
+        if stop():
+            return None
+    return total / max(seen, 1)
+
+
 def train_classifier(
     cfg: CollisionConfig,
     run_dir: str | Path | None = None,
     progress: bool = True,
     samples: dict[str, CollisionSamples] | None = None,
+    resume: str | Path | None = None,
+    queue: Sequence[str] = (),
 ) -> CollisionResult:
     """Draw the data (unless given), train, select on validation, test once.
 
-    With ``run_dir``, writes ``<observation>.pt`` (the classifier) and ``<observation>.json``
-    (the summary). Ctrl-C stops after the current gradient step; the best model so far is
-    still tested and saved, and the result says it was interrupted."""
-    from .train import _StopOnCtrlC
-
+    With ``run_dir``, writes ``<observation>.pt`` (the classifier), ``<observation>.json``
+    (the summary), ``<observation>_metrics.csv`` and TensorBoard logs. Ctrl-C stops after
+    the current gradient step: with ``run_dir`` the trainer state goes to ``last.pt``
+    (``resume`` continues from it; ``queue``, the observations the command trains after
+    this one, is kept there too); the result says it was interrupted and nothing is tested."""
+    folder = RunDir(run_dir, "pointplan collision-classify", f"{cfg.observation}_metrics.csv", f"tb/{cfg.observation}") if run_dir is not None else None
     torch.manual_seed(cfg.seed)
-    scenario = make_scenario(cfg.env)
-    robot = scenario.robot
+    robot = make_scenario(cfg.env).robot
     t0 = time.perf_counter()
     if samples is None:
         samples = make_data(cfg, progress)
     data = {split: _tensors(cfg, samples[split], robot, k) for k, split in enumerate(("train", "val", "test"))}
     t_data = time.perf_counter() - t0
-    device = torch.device(cfg.device)
     obs_shape = tuple(data["train"].obs.shape[1:])
-    enc = EncoderConfig(kind=cfg.encoder_kind, width=cfg.width, layers=3)
-    model = CollisionClassifier(obs_shape, enc, robot.twist_dim, cfg.width, 3).to(device)
-    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    loss_fn = nn.BCEWithLogitsLoss()
-    rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0x7EA1]))
-    tr = data["train"]
-    n = len(tr.label)
-    steps_per_epoch = int(np.ceil(n / cfg.batch_size))
+    model = CollisionClassifier(obs_shape, EncoderConfig(kind=cfg.encoder_kind, width=cfg.width, layers=3), robot.twist_dim, cfg.width, 3).to(
+        torch.device(cfg.device)
+    )
+    fit = _Fit(model, torch.optim.Adam(model.parameters(), lr=cfg.lr), np.random.default_rng(np.random.SeedSequence([cfg.seed, 0x7EA1])))
+    if resume is not None:
+        fit.resume(resume)
+        if folder is not None:
+            folder.metrics.drop_after(fit.epoch)
     bar: Any = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=cfg.epochs * steps_per_epoch, desc=f"{cfg.observation} classifier", unit="step", dynamic_ncols=True)
-    history: list[dict[str, float]] = []
-    best_acc, best_epoch, best_state = -1.0, 0, None
+        steps = int(np.ceil(len(data["train"].label) / cfg.batch_size))
+        bar = tqdm(total=cfg.epochs * steps, initial=fit.epoch * steps, desc=f"{cfg.observation} classifier", unit="step", dynamic_ncols=True)
     t1 = time.perf_counter()
-    with _StopOnCtrlC(enabled=True) as ctrl_c:
-        for ep in range(cfg.epochs):
-            model.train()
-            perm = torch.as_tensor(rng.permutation(n))
-            total, seen = 0.0, 0
-            for s in range(0, n, cfg.batch_size):
-                b = perm[s : s + cfg.batch_size]
-                logit = model(tr.obs[b].to(device, torch.float32), tr.action[b].to(device))
-                loss = loss_fn(logit, tr.label[b].to(device))
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                total += float(loss.detach()) * len(b)
-                seen += len(b)
-                if bar is not None:
-                    bar.update()
-                if ctrl_c.requested:
-                    break
+    train_time = lambda: fit.train_before + time.perf_counter() - t1
+    with CtrlC() as stop:
+        for ep in range(fit.epoch + 1, cfg.epochs + 1):
+            loss = _train_epoch(fit, data["train"], cfg, bar, stop)
+            if loss is None:
+                break
             val = accuracy_report(predict(model, data["val"]), data["val"].samples, cfg.label, cfg.band)
-            row = {
-                "epoch": ep + 1,
-                "train_loss": total / max(seen, 1),
-                "val_accuracy": val["accuracy"],
-                "val_accuracy_near": val["accuracy_near"],
-                "wall_time_s": time.perf_counter() - t1,
-            }
-            history.append(row)
-            if val["accuracy"] > best_acc:
-                best_acc, best_epoch = val["accuracy"], ep + 1
-                best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+            row = {"epoch": ep, "train_loss": loss, "val_accuracy": val["accuracy"], "val_accuracy_near": val["accuracy_near"], "wall_time_s": train_time()}
+            fit.epoch = ep
+            fit.history.append(row)
+            if folder is not None:
+                folder.log(row)
+            if val["accuracy"] > fit.best_acc:
+                fit.best_acc, fit.best_epoch = val["accuracy"], ep
+                fit.best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
             if bar is not None:
-                bar.set_postfix(loss=f"{row['train_loss']:.3f}", val=f"{val['accuracy']:.3f}", best=f"{best_acc:.3f}")
-            if ctrl_c.requested:
+                bar.set_postfix(loss=f"{loss:.3f}", val=f"{val['accuracy']:.3f}", best=f"{fit.best_acc:.3f}")
+            if stop():
                 break
     if bar is not None:
         bar.close()
-    if ctrl_c.requested:
-        print(f"\ninterrupted in epoch {len(history)}: testing the best model so far (epoch {best_epoch})", file=sys.stderr)
-    train_time = time.perf_counter() - t1
-    assert best_state is not None
-    model.load_state_dict(best_state)
-    val_best = accuracy_report(predict(model, data["val"]), data["val"].samples, cfg.label, cfg.band)
-    test_pred = predict(model, data["test"])
-    test = accuracy_report(test_pred, data["test"].samples, cfg.label, cfg.band)
-    res = CollisionResult(model, history, best_epoch, test, val_best, train_time, t_data, ctrl_c.requested, test_pred, samples["test"])
+    res = CollisionResult(model, fit.history, fit.best_epoch, {}, {}, 0.0, t_data, fit.epoch < cfg.epochs)
     res.extra["obs_shape"] = list(obs_shape)
+    if res.interrupted:
+        res.train_time_s = train_time()
+        if folder is not None:
+            note = f"best validation accuracy {fit.best_acc:.3f} at epoch {fit.best_epoch}" if fit.best_state is not None else "no validation yet"
+            folder.interrupted(
+                f"in epoch {fit.epoch + 1} of {cfg.epochs}", lambda: folder.save("last.pt", fit.state(cfg, list(obs_shape), queue, res.train_time_s)), note
+            )
+        return res
+    res.train_time_s = train_time()
+    return _test_classifier(cfg, res, fit, data, samples, folder)
+
+
+def _test_classifier(
+    cfg: CollisionConfig, res: CollisionResult, fit: _Fit, data: dict[str, SplitData], samples: dict[str, CollisionSamples], folder: RunDir | None
+) -> CollisionResult:
+    """The best epoch's classifier on validation and test samples; saved with ``folder``."""
+    assert fit.best_state is not None
+    model = res.model
+    model.load_state_dict(fit.best_state)
+    res.val = accuracy_report(predict(model, data["val"]), data["val"].samples, cfg.label, cfg.band)
+    res.test_pred = predict(model, data["test"])
+    res.test_samples = samples["test"]
+    res.test = accuracy_report(res.test_pred, data["test"].samples, cfg.label, cfg.band)
     if cfg.label == "end":  # the same predictions against the swept-move label
-        res.extra["test_vs_swept_label"] = accuracy_report(test_pred, samples["test"], "swept", cfg.band)
+        res.extra["test_vs_swept_label"] = accuracy_report(res.test_pred, samples["test"], "swept", cfg.band)
         res.extra["test_labels_differ"] = float(np.mean(samples["test"].labels("end") != samples["test"].labels("swept")))
     res.extra["parameters"] = int(sum(p.numel() for p in model.parameters()))
-    if run_dir is not None:
-        save_classifier(Path(run_dir), cfg, res)
+    if folder is not None:
+        save_classifier(folder.path, cfg, res, folder)
+        folder.close()
     return res
 
 
-def save_classifier(run_dir: Path, cfg: CollisionConfig, res: CollisionResult) -> None:
-    """``<observation>.pt`` (weights, config, shape) and ``<observation>.json`` (summary)."""
-    run_dir.mkdir(parents=True, exist_ok=True)
-    torch.save({"config": to_dict(cfg), "obs_shape": res.extra["obs_shape"], "model": res.model.state_dict()}, run_dir / f"{cfg.observation}.pt")
-    (run_dir / f"{cfg.observation}.json").write_text(json.dumps(res.summary(cfg), indent=2) + "\n")
+def save_classifier(run_dir: Path, cfg: CollisionConfig, res: CollisionResult, folder: RunDir | None = None) -> None:
+    """``<observation>.pt`` (weights, config, shape), ``<observation>.json`` (summary) and
+    ``<observation>_test.npz`` (the test predictions), each written atomically."""
+    folder = folder or RunDir(run_dir, "pointplan collision-classify")
+    folder.save_torch(f"{cfg.observation}.pt", {"config": to_dict(cfg), "obs_shape": res.extra["obs_shape"], "model": res.model.state_dict()})
+    folder.write_json(f"{cfg.observation}.json", res.summary(cfg))
     if res.test_pred is not None and res.test_samples is not None:
         t = res.test_samples
-        np.savez_compressed(
-            run_dir / f"{cfg.observation}_test.npz",
-            pred=res.test_pred,
-            end_clearance=t.end_clearance,
-            swept_clearance=t.swept_clearance,
-            scene=t.scene,
-            q=t.q,
-            action=t.action,
-        )
+        arrays = {"pred": res.test_pred, "end_clearance": t.end_clearance, "swept_clearance": t.swept_clearance, "scene": t.scene, "q": t.q, "action": t.action}
+        atomic_write(folder.path / f"{cfg.observation}_test.npz", lambda tmp: _savez(tmp, arrays))
+
+
+def _savez(path: Path, arrays: dict[str, Any]) -> None:
+    with path.open("wb") as f:  # (a file object: np.savez would add .npz to a name)
+        np.savez_compressed(f, **arrays)
 
 
 def load_classifier(path: str | Path) -> tuple[CollisionClassifier, CollisionConfig]:

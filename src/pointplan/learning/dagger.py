@@ -13,9 +13,8 @@ steps).
 
 from __future__ import annotations
 
-import csv
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,7 +24,7 @@ import torch
 
 from ..envs.core import EnvConfig
 from ..models.actor_critic import Actor
-from ..models.checkpoint import load_checkpoint, save_checkpoint, to_dict
+from ..models.checkpoint import load_checkpoint, to_dict
 from ..models.policy import Policy
 from ..scenes.scenarios import Scenario, make_scenario
 from .bc import (
@@ -42,6 +41,7 @@ from .bc import (
     policy_payload,
     save_demos,
 )
+from .rundir import RunDir, best_or_none, load_trainer_state, say_interrupted_early
 
 
 @dataclass(frozen=True)
@@ -57,7 +57,7 @@ class DaggerConfig:
     labels_per_failure: int = 4
     #: passes over all demonstrations after each round
     epochs_per_round: float = 2.0
-    #: validation problems (``val`` split) after each round
+    #: validation problems (``val`` split): after the cloning, and after each DAgger round
     eval_episodes: int = field(default=200, metadata={"min": 1})
     #: Bi-RRT node budget of the expert
     max_nodes: int = field(default=20000, metadata={"min": 1})
@@ -88,36 +88,11 @@ def _label_jobs(cfg: DaggerConfig, scenario: Scenario, rnd: int, results: list[A
     return jobs
 
 
-class _Log:
-    def __init__(self, path: Path) -> None:
-        self.path = path
-
-    def write(self, row: dict[str, float]) -> None:
-        new = not self.path.exists()
-        with self.path.open("a", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(row))
-            if new:
-                w.writeheader()
-            w.writerow(row)
-
-
 def _validate(policy: Policy, scenario: Scenario, env: EnvConfig, problems: list[Any], seed: int) -> tuple[float, float]:
     from ..planners.rollout import rollout_batch
 
     res = rollout_batch(policy, scenario.robot, env, problems, scenario.horizon, seed=seed)
     return float(np.mean([r.success for r in res])), float(np.mean([r.nodes for r in res]))
-
-
-def _resume(path: str | Path, device: str, actor: Actor, opt: torch.optim.Optimizer, rng: np.random.Generator) -> dict[str, Any]:
-    """Restore the actor, the optimiser and the random streams of a DAgger ``last.pt``;
-    returns its counters (``round``, ``best``, ...)."""
-    state = load_checkpoint(path, device)
-    actor.load_state_dict(state["actor"])
-    d = state["dagger"]
-    opt.load_state_dict(d["optimizer"])
-    rng.bit_generator.state = d["rng"]
-    torch.set_rng_state(d["torch_rng"])
-    return dict(d)
 
 
 def _threading_labels(
@@ -163,14 +138,6 @@ def first_demos(cfg: DaggerConfig, scenario: Scenario, demos_path: Path, progres
     return demos
 
 
-def _save(run_dir: Path, payload: dict[str, Any], counters: dict[str, Any], opt: torch.optim.Optimizer, rng: np.random.Generator, improved: bool) -> None:
-    """``last.pt`` with the state to resume from; ``best.pt`` when validation improved."""
-    state = {**counters, "optimizer": opt.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}
-    save_checkpoint(run_dir / "last.pt", {**payload, "dagger": state})
-    if improved:
-        save_checkpoint(run_dir / "best.pt", payload)
-
-
 def _roll_out_and_label(
     cfg: DaggerConfig, scenario: Scenario, policy: Policy, env: EnvConfig, rnd: int, pool: Any, progress: bool
 ) -> tuple[list[Any], list[Any]]:
@@ -196,83 +163,163 @@ def _print_round(row: dict[str, Any], best: float) -> None:
     )
 
 
+class _DaggerRun:
+    """The pieces of a DAgger run and its counters (built by :func:`train_dagger`)."""
+
+    def __init__(self, cfg: DaggerConfig, folder: RunDir, progress: bool, init_actor: str | None, resume: str | Path | None, pool: Any) -> None:
+        b = cfg.bc
+        self.cfg, self.folder = cfg, folder
+        self.scenario = make_scenario(b.env, robot=b.robot)
+        self.robot = self.scenario.robot
+        self.env = EnvConfig(observation=b.observation, n_points=b.n_points, split="train")
+        self.rng = np.random.default_rng(b.seed)
+        torch.manual_seed(b.seed)
+        self.obs_shape = observation_shape(self.robot, self.env)
+        self.actor = Actor(self.obs_shape, self.robot.twist_dim, self.robot.twist_dim, b.net).to(b.device)
+        self.opt = torch.optim.Adam(self.actor.parameters(), lr=b.lr)
+        self.demos_path = folder.path / "demos.npz"
+        self.round, self.best, self.best_nodes, self.wall_before, self.env_steps = 0, -1.0, float("inf"), 0.0, 0
+        self.clone_losses: list[float] = []
+        self.clone_done = bool(init_actor)
+        if resume is not None:
+            self._resume(resume)
+            self.demos = load_demos(self.demos_path, self.scenario)
+            folder.metrics.drop_after(self.round)
+        else:
+            self.demos = first_demos(cfg, self.scenario, self.demos_path, progress, pool)
+            if init_actor:
+                self.actor.load_state_dict(load_checkpoint(init_actor, b.device)["actor"])
+        self.policy = Policy(self.actor, self.robot, {"observation": b.observation, "n_points": b.n_points}, b.device)
+        self.val_problems = self.scenario.problems("val", cfg.eval_episodes, seed=b.seed)
+        self.t0 = time.perf_counter()
+
+    def _resume(self, path: str | Path) -> None:
+        """Restore the actor, the optimiser, the random streams and the counters of a DAgger ``last.pt``."""
+        state = load_trainer_state(path, "dagger", "pointplan bc", self.cfg.bc.device)
+        self.actor.load_state_dict(state["actor"])
+        d = state["dagger"]
+        self.opt.load_state_dict(d["optimizer"])
+        self.rng.bit_generator.state = d["rng"]
+        torch.set_rng_state(d["torch_rng"])
+        self.round, self.best, self.best_nodes = int(d["round"]), float(d["best"]), float(d["best_nodes"])
+        self.wall_before, self.env_steps = float(d["wall_time_s"]), int(d["env_steps"])
+        self.clone_losses = [float(x) for x in d.get("clone_losses", [])]
+        self.clone_done = bool(d.get("clone_done", True))  # (runs saved before this was kept had cloned)
+
+    @property
+    def wall(self) -> float:
+        return self.wall_before + time.perf_counter() - self.t0
+
+    def clone(self, progress: bool, stop: Callable[[], bool]) -> None:
+        """The behavioural cloning the rounds start from (what is left of it on resume)."""
+        b = self.cfg.bc
+        if not self.clone_done:
+            self.actor.train()
+            fit_actor(
+                self.actor,
+                self.opt,
+                self.demos,
+                self.robot,
+                self.env,
+                b.epochs,
+                b.batch_size,
+                self.rng,
+                b.refresh_every,
+                progress,
+                b.spread_weight,
+                self.clone_losses,
+                stop,
+            )
+            self.clone_done = len(self.clone_losses) >= b.epochs
+
+    def play_round(self, rnd: int, pool: Any, progress: bool, stop: Callable[[], bool]) -> dict[str, Any] | None:
+        """Round ``rnd``: roll out, label, refit, validate, log and save; None when ``stop``
+        ended it early (the round is played again on resume)."""
+        cfg, b = self.cfg, self.cfg.bc
+        self.actor.eval()
+        results, new = _roll_out_and_label(cfg, self.scenario, self.policy, self.env, rnd, pool, progress)
+        if stop():
+            return None
+        self.demos = demos_from_paths(self.scenario, "train", b.seed, self.demos.paths + new)
+        save_demos(self.demos_path, self.scenario, self.demos, "train", b.seed)
+        self.actor.train()
+        losses = fit_actor(
+            self.actor, self.opt, self.demos, self.robot, self.env, cfg.epochs_per_round, b.batch_size, self.rng, 1, progress, b.spread_weight, None, stop
+        )
+        if stop():
+            return None
+        self.actor.eval()
+        val, nodes = _validate(self.policy, self.scenario, self.env, self.val_problems, b.seed)
+        improved = val > self.best or (val == self.best and nodes < self.best_nodes)
+        if improved:
+            self.best, self.best_nodes = val, nodes
+        self.round, self.env_steps = rnd + 1, self.env_steps + sum(r.nodes for r in results)
+        row = {
+            "round": rnd + 1,
+            "wall_time_s": self.wall,
+            "rollout_success": float(np.mean([r.success for r in results])),
+            "labels": len(new),
+            "demo_steps": len(self.demos),
+            "val_success": val,
+            "val_nodes": nodes,
+            "loss": losses[-1],
+            "rollout_env_steps": self.env_steps,
+        }
+        self.folder.log(row)
+        self.save({"val_success": val}, improved)
+        return row
+
+    def save(self, extra: dict[str, Any], improved: bool = False) -> None:
+        """``last.pt`` with the state to resume from; ``best.pt`` when validation improved."""
+        wall = self.wall
+        payload = {
+            **policy_payload(self.cfg.bc, self.robot.name, self.obs_shape, self.actor, self.scenario.horizon),
+            "dagger_config": to_dict(self.cfg),
+            **extra,
+            "wall_time_s": wall,
+            "round": self.round,
+        }
+        counters = {"round": self.round, "best": self.best, "best_nodes": self.best_nodes, "wall_time_s": wall, "env_steps": self.env_steps}
+        clone = {"clone_losses": list(self.clone_losses), "clone_done": self.clone_done}
+        state = {**counters, **clone, "optimizer": self.opt.state_dict(), "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state()}
+        self.folder.save("last.pt", {**payload, "dagger": state})
+        if improved:
+            self.folder.save("best.pt", payload)
+
+
 def train_dagger(
     cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, init_actor: str | None = None, resume: str | Path | None = None, pool: Any = None
 ) -> dict[str, Any]:
     """Behavioural cloning (from ``init_actor`` if given, else fitted here), then
-    ``cfg.rounds`` DAgger rounds; checkpoints ``best.pt`` and ``last.pt`` (resumable) and
-    ``metrics.csv`` in ``run_dir``, the aggregated demonstrations in ``demos.npz``. The
-    Bi-RRT expert plans on ``pool`` if given (else see :func:`~.bc.demo_pool`)."""
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    b = cfg.bc
-    scenario = make_scenario(b.env, robot=b.robot)
-    robot = scenario.robot
-    env = EnvConfig(observation=b.observation, n_points=b.n_points, split="train")
-    rng = np.random.default_rng(b.seed)
-    torch.manual_seed(b.seed)
-    obs_shape = observation_shape(robot, env)
-    actor = Actor(obs_shape, robot.twist_dim, robot.twist_dim, b.net).to(b.device)
-    opt = torch.optim.Adam(actor.parameters(), lr=b.lr)
-    demos_path = run_dir / "demos.npz"
-    start_round, best, best_nodes, wall_before, env_steps = 0, -1.0, float("inf"), 0.0, 0
-    if resume is not None:
-        d = _resume(resume, b.device, actor, opt, rng)
-        start_round, best, best_nodes, wall_before = int(d["round"]), float(d["best"]), float(d["best_nodes"]), float(d["wall_time_s"])
-        env_steps = int(d["env_steps"])
-        demos = load_demos(demos_path, scenario)
-    else:
-        demos = first_demos(cfg, scenario, demos_path, progress, pool)
-        if init_actor:
-            actor.load_state_dict(load_checkpoint(init_actor, b.device)["actor"])
-        else:
-            fit_actor(actor, opt, demos, robot, env, b.epochs, b.batch_size, rng, b.refresh_every, progress, b.spread_weight)
-    policy = Policy(actor, robot, {"observation": b.observation, "n_points": b.n_points}, b.device)
-    val_problems = scenario.problems("val", cfg.eval_episodes, seed=b.seed)
-    log = _Log(run_dir / "metrics.csv")
+    ``cfg.rounds`` DAgger rounds; checkpoints ``best.pt`` and ``last.pt`` (resumable, also
+    after Ctrl-C), ``metrics.csv`` and TensorBoard logs in ``run_dir``, the aggregated
+    demonstrations in ``demos.npz``. The Bi-RRT expert plans on ``pool`` if given (else see
+    :func:`~.bc.demo_pool`)."""
+    folder = RunDir(run_dir, "pointplan bc")
+    try:
+        run = _DaggerRun(cfg, folder, progress, init_actor, resume, pool)
+    except KeyboardInterrupt:
+        say_interrupted_early("planning the demonstrations")
+        return {"run_dir": str(folder.path), "best_success": None, "interrupted": True}
     own = pool is None
     if own:
-        pool = demo_pool(b.workers, b.address)
-    t0 = time.perf_counter()
+        pool = demo_pool(cfg.bc.workers, cfg.bc.address)
     try:
-        for rnd in range(start_round, cfg.rounds):
-            actor.eval()
-            results, new = _roll_out_and_label(cfg, scenario, policy, env, rnd, pool, progress)
-            env_steps += sum(r.nodes for r in results)
-            demos = demos_from_paths(scenario, "train", b.seed, demos.paths + new)
-            save_demos(demos_path, scenario, demos, "train", b.seed)
-            actor.train()
-            losses = fit_actor(actor, opt, demos, robot, env, cfg.epochs_per_round, b.batch_size, rng, 1, progress, b.spread_weight)
-            actor.eval()
-            val, nodes = _validate(policy, scenario, env, val_problems, b.seed)
-            wall = wall_before + time.perf_counter() - t0
-            improved = val > best or (val == best and nodes < best_nodes)
-            if improved:
-                best, best_nodes = val, nodes
-            row = {
-                "round": rnd + 1,
-                "wall_time_s": wall,
-                "rollout_success": float(np.mean([r.success for r in results])),
-                "labels": len(new),
-                "demo_steps": len(demos),
-                "val_success": val,
-                "val_nodes": nodes,
-                "loss": losses[-1],
-                "rollout_env_steps": env_steps,
-            }
-            log.write(row)
-            payload = {
-                **policy_payload(b, robot.name, obs_shape, actor, scenario.horizon),
-                "dagger_config": to_dict(cfg),
-                "val_success": val,
-                "wall_time_s": wall,
-                "round": rnd + 1,
-            }
-            counters = {"round": rnd + 1, "best": best, "best_nodes": best_nodes, "wall_time_s": wall, "env_steps": env_steps}
-            _save(run_dir, payload, counters, opt, rng, improved)
-            if progress:
-                _print_round(row, best)
+        with folder.ctrl_c() as stop:
+            run.clone(progress, stop)
+            for rnd in range(run.round, cfg.rounds):
+                row = None if stop() else run.play_round(rnd, pool, progress, stop)
+                if row is None:
+                    break
+                if progress:
+                    _print_round(row, run.best)
     finally:
         if own and pool is not None:
             pool.shutdown(cancel_futures=True)
-    return {"run_dir": str(run_dir), "best_success": best, "demo_steps": len(demos), "wall_time_s": wall_before + time.perf_counter() - t0}
+    interrupted = stop.requested and not (run.clone_done and run.round >= cfg.rounds)  # (not when it came after the last round)
+    if interrupted:
+        where = f"in round {run.round + 1} of {cfg.rounds}" if run.clone_done else f"while cloning, in epoch {len(run.clone_losses) + 1} of {cfg.bc.epochs}"
+        folder.interrupted(where, lambda: run.save({}))
+    folder.close()
+    summary = {"run_dir": str(folder.path), "best_success": best_or_none(run.best), "demo_steps": len(run.demos), "wall_time_s": run.wall}
+    return {**summary, "interrupted": interrupted}

@@ -16,8 +16,8 @@ mean nodes at lambda 0.9 (ties: the later epoch), ``last.pt`` the last one.
 
 from __future__ import annotations
 
-import csv
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,11 +25,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..models.checkpoint import save_checkpoint, to_dict
+from ..models.checkpoint import to_dict
 from ..models.cvae import POINT_SPACING, CVAEConfig, LearnedSamplerNet, normalise, pad_cloud, scene_cloud
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from .bc import Demos, generate_demos, load_demos, save_demos
+from .rundir import RunDir, load_trainer_state, say_interrupted_early
 
 
 @dataclass(frozen=True)
@@ -203,103 +204,174 @@ def plan_validation(checkpoint: Path, scenario: Scenario, n: int, seed: int, lam
     out = {}
     for lam in lams:
         planner = LearnedSamplingPlanner(scenario.robot, lam=lam, checkpoint=checkpoint, seed=seed, max_nodes=20000)
-        out[f"lsample-{lam:g}"] = evaluate(planner, problems, scenario.robot, progress=False).metrics()
+        report = evaluate(planner, problems, scenario.robot, progress=False)
+        if report.interrupted:  # (a second Ctrl-C): a partial validation selects nothing
+            raise KeyboardInterrupt
+        out[f"lsample-{lam:g}"] = report.metrics()
     return out
 
 
-def _demos(scenario: Scenario, cfg: LSampleConfig, split: str, n: int, file: str | None, progress: bool, pool: Any = None) -> Demos:
+def _demos(scenario: Scenario, cfg: LSampleConfig, split: str, n: int, file: str | None, progress: bool, pool: Any = None, keep: Path | None = None) -> Demos:
+    """The demonstrations of ``split``: ``file``'s if it exists, else planned and written to
+    ``file`` (or ``keep``, the run folder's copy a resumed run reads back)."""
     if file and Path(file).exists():
         return load_demos(file, scenario)
     demos = generate_demos(scenario, n, cfg.seed, cfg.max_nodes, progress=progress, split=split, workers=cfg.workers, pool=pool)
-    if file:
-        save_demos(file, scenario, demos, split, cfg.seed)
+    if file or keep:
+        save_demos(file or str(keep), scenario, demos, split, cfg.seed)
     return demos
 
 
-def train_lsample(cfg: LSampleConfig, run_dir: str | Path, progress: bool = True, pool: Any = None) -> dict[str, Any]:
+class _LSampleRun:
+    """The data, the network and the counters of a learned-sampler training run (see :func:`train_lsample`)."""
+
+    def __init__(self, cfg: LSampleConfig, folder: RunDir, progress: bool, pool: Any, resume: str | Path | None) -> None:
+        self.cfg, self.folder = cfg, folder
+        self.scenario = make_scenario(cfg.env)
+        self.robot = self.scenario.robot
+        self.low, self.high = self.scenario.bounds
+        self.rng = np.random.default_rng(cfg.seed)
+        torch.manual_seed(cfg.seed)
+        t0 = time.perf_counter()
+        keep = {split: folder.path / f"demos_{split}.npz" for split in ("train", "val")}
+        files = {
+            split: f or (str(keep[split]) if resume is not None and keep[split].exists() else None)
+            for split, f in (("train", cfg.demos), ("val", cfg.val_demos))
+        }
+        train_demos = _demos(self.scenario, cfg, "train", cfg.n_problems, files["train"], progress, pool, keep["train"])
+        val_demos = _demos(self.scenario, cfg, "val", cfg.val_problems, files["val"], progress, pool, keep["val"])
+        self.data_time = time.perf_counter() - t0
+        self.train = path_set(train_demos, self.robot, self.low, self.high, cfg.path_spacing)
+        self.val = path_set(val_demos, self.robot, self.low, self.high, cfg.path_spacing)
+        self.net = LearnedSamplerNet(cfg.net, self.robot.dim)
+        self.opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr)
+        self.rows: list[dict[str, Any]] = []
+        self.best: tuple[float, int] | None = None
+        self.epoch, self.train_before = 0, 0.0
+        if resume is not None:
+            self._resume(resume)
+        self.t1 = time.perf_counter()
+
+    def _resume(self, path: str | Path) -> None:
+        state = load_trainer_state(path, "lsample_trainer", "pointplan lsample-train")
+        self.net.load_state_dict(state["weights"])
+        t = state["lsample_trainer"]
+        self.opt.load_state_dict(t["optimizer"])
+        self.rng.bit_generator.state = t["rng"]
+        torch.set_rng_state(t["torch_rng"])
+        self.epoch, self.train_before = int(t["epoch"]), float(t["train_time_s"])
+        self.best = (float(t["best"][0]), int(t["best"][1])) if t["best"] is not None else None
+        self.rows = [dict(r) for r in t["rows"]]
+        self.folder.metrics.drop_after(self.epoch)
+
+    @property
+    def train_time(self) -> float:
+        return self.train_before + time.perf_counter() - self.t1
+
+    def payload(self, **extra: Any) -> dict[str, Any]:
+        return sampler_payload(self.cfg, self.robot, self.net, self.low, self.high, epoch=self.epoch, **extra)
+
+    def save_last(self, **extra: Any) -> None:
+        """``last.pt``: the sampler (a sampler checkpoint) with the trainer state to resume from."""
+        state = {
+            "epoch": self.epoch,
+            "optimizer": self.opt.state_dict(),
+            "rng": self.rng.bit_generator.state,
+            "torch_rng": torch.get_rng_state(),
+            "best": list(self.best) if self.best is not None else None,
+            "rows": [_plain(r) for r in self.rows],
+            "train_time_s": self.train_time,
+        }
+        self.folder.save("last.pt", {**self.payload(**extra), "lsample_trainer": state})
+
+    def train_epoch(self, ep: int, stop: Callable[[], bool]) -> dict[str, Any] | None:
+        """One pass over the training problems; None when ``stop`` ended it early."""
+        cfg, train = self.cfg, self.train
+        perm = self.rng.permutation(len(train))
+        tot, nb = 0.0, 0
+        for s in range(0, len(perm), cfg.batch_problems):
+            loss, _, _ = batch_loss(self.net, _batch(train, perm[s : s + cfg.batch_problems], cfg.per_problem, self.rng), cfg.per_problem, cfg.kl_weight)
+            self.opt.zero_grad(set_to_none=True)
+            loss.backward()
+            self.opt.step()
+            tot += float(loss.detach())
+            nb += 1
+            if stop():
+                return None
+        self.epoch = ep
+        return {"epoch": ep, "train_loss": tot / max(nb, 1), "train_time_s": self.train_time}
+
+    def validate(self, row: dict[str, Any]) -> None:
+        """The validation loss; when due, the planner on validation problems (``best.pt``:
+        the fewest mean nodes at lambda 0.9, ties to the later epoch)."""
+        cfg, ep = self.cfg, int(row["epoch"])
+        row.update({f"val_{k}": v for k, v in validation_loss(self.net, self.val, cfg).items()})
+        if not cfg.plan_problems or not (ep % cfg.eval_every == 0 or ep == cfg.epochs):
+            return
+        self.save_last()  # (the planner reads the sampler from a file)
+        plans = plan_validation(self.folder.last, self.scenario, cfg.plan_problems, cfg.seed)
+        for name, m in plans.items():
+            for key in ("success_rate", "nodes_mean", "nodes_median", "collision_checks_mean", "time_mean_s"):
+                row[f"{name}_{key}"] = m[key]
+        score = float(plans["lsample-0.9"]["nodes_mean"])
+        if self.best is None or score <= self.best[0]:
+            self.best = (score, ep)
+            self.folder.save("best.pt", self.payload(val=_plain(row)))
+
+
+def train_lsample(cfg: LSampleConfig, run_dir: str | Path, progress: bool = True, pool: Any = None, resume: str | Path | None = None) -> dict[str, Any]:
     """Plan the data (or load it; Bi-RRT on ``pool`` if given), fit the CVAE, select the
-    epoch on validation problems; writes ``best.pt``, ``last.pt``, ``metrics.csv`` to
+    epoch on validation problems; writes ``best.pt``, ``last.pt`` (the trainer state, also
+    on Ctrl-C; ``resume`` continues from it), ``metrics.csv`` and TensorBoard logs to
     ``run_dir``. Returns a summary."""
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    folder = RunDir(run_dir, "pointplan lsample-train")
     torch.set_num_threads(1)
-    scenario = make_scenario(cfg.env)
-    robot = scenario.robot
-    low, high = scenario.bounds
-    rng = np.random.default_rng(cfg.seed)
-    torch.manual_seed(cfg.seed)
-    t0 = time.perf_counter()
-    train_demos = _demos(scenario, cfg, "train", cfg.n_problems, cfg.demos, progress, pool)
-    val_demos = _demos(scenario, cfg, "val", cfg.val_problems, cfg.val_demos, progress, pool)
-    t_data = time.perf_counter() - t0
-    train = path_set(train_demos, robot, low, high, cfg.path_spacing)
-    val = path_set(val_demos, robot, low, high, cfg.path_spacing)
-    net = LearnedSamplerNet(cfg.net, robot.dim)
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
-    epochs: Any = range(1, cfg.epochs + 1)
-    bar = None
+    try:
+        run = _LSampleRun(cfg, folder, progress, pool, resume)
+    except KeyboardInterrupt:
+        say_interrupted_early("planning the demonstrations")
+        return {"run_dir": str(folder.path), "epochs": 0, "interrupted": True}
+    if run.epoch >= cfg.epochs:
+        raise ValueError(f"{resume}: the run has done its {run.epoch} epochs; give --epochs above that to continue it")
+    epochs: Any = range(run.epoch + 1, cfg.epochs + 1)
     if progress:
         from tqdm import tqdm
 
-        epochs = bar = tqdm(epochs, desc="lsample-train", unit="epoch")
-    rows: list[dict[str, Any]] = []
-    best: tuple[float, int] | None = None
-    t1 = time.perf_counter()
-    interrupted = False
-    try:
+        epochs = tqdm(epochs, desc="lsample-train", unit="epoch", total=cfg.epochs, initial=run.epoch)
+    with folder.ctrl_c() as stop:
         for ep in epochs:
-            perm = rng.permutation(len(train))
-            tot, nb = 0.0, 0
-            for s in range(0, len(perm), cfg.batch_problems):
-                loss, _, _ = batch_loss(net, _batch(train, perm[s : s + cfg.batch_problems], cfg.per_problem, rng), cfg.per_problem, cfg.kl_weight)
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                tot += float(loss.detach())
-                nb += 1
-            row: dict[str, Any] = {"epoch": ep, "train_loss": tot / max(nb, 1), "train_time_s": time.perf_counter() - t1}
-            row.update({f"val_{k}": v for k, v in validation_loss(net, val, cfg).items()})
-            if cfg.plan_problems and (ep % cfg.eval_every == 0 or ep == cfg.epochs):
-                save_checkpoint(run_dir / "last.pt", sampler_payload(cfg, robot, net, low, high, epoch=ep))
-                plans = plan_validation(run_dir / "last.pt", scenario, cfg.plan_problems, cfg.seed)
-                for name, m in plans.items():
-                    for key in ("success_rate", "nodes_mean", "nodes_median", "collision_checks_mean", "time_mean_s"):
-                        row[f"{name}_{key}"] = m[key]
-                score = float(plans["lsample-0.9"]["nodes_mean"])
-                if best is None or score <= best[0]:
-                    best = (score, ep)
-                    save_checkpoint(run_dir / "best.pt", sampler_payload(cfg, robot, net, low, high, epoch=ep, val=_plain(row)))
-            rows.append(row)
-            if bar is not None:
+            row = run.train_epoch(ep, stop)
+            if row is None:
+                break
+            run.validate(row)
+            run.rows.append(row)
+            folder.log(row)
+            if progress:
                 post = {"loss": f"{row['train_loss']:.4f}", "val": f"{row['val_loss']:.4f}", "near": f"{row['val_near']:.3f}"}
-                if best is not None:
-                    post["best_nodes_0.9"] = f"{best[0]:.1f}@{best[1]}"
-                bar.set_postfix(post)
-    except KeyboardInterrupt:
-        interrupted = True
-        print(f"\ninterrupted after {len(rows)} epochs: keeping them")
-    train_time = time.perf_counter() - t1
-    last = rows[-1] if rows else {"epoch": 0}
-    save_checkpoint(run_dir / "last.pt", sampler_payload(cfg, robot, net, low, high, epoch=int(last["epoch"]), val=_plain(last), train_time_s=train_time))
-    if best is None:  # no planning evaluation: the last epoch
-        save_checkpoint(run_dir / "best.pt", sampler_payload(cfg, robot, net, low, high, epoch=int(last["epoch"]), val=_plain(last)))
-    if rows:
-        keys = sorted({k for r in rows for k in r}, key=lambda k: (k != "epoch", k))
-        with open(run_dir / "metrics.csv", "w", newline="") as f:
-            w = csv.DictWriter(f, keys)
-            w.writeheader()
-            w.writerows(rows)
+                if run.best is not None:
+                    post["best_nodes_0.9"] = f"{run.best[0]:.1f}@{run.best[1]}"
+                epochs.set_postfix(post)
+            if stop():
+                break
+    if progress:
+        epochs.close()
+    summary = {"run_dir": str(folder.path), "epochs": run.epoch, "data_time_s": run.data_time, "interrupted": run.epoch < cfg.epochs}
+    if summary["interrupted"]:
+        folder.interrupted(f"in epoch {run.epoch + 1} of {cfg.epochs}", run.save_last)
+    else:
+        last = run.rows[-1]
+        run.save_last(val=_plain(last), train_time_s=run.train_time)
+        if run.best is None:  # no planning evaluation: the last epoch
+            folder.save("best.pt", run.payload(val=_plain(last)))
+    folder.close()
     return {
-        "run_dir": str(run_dir),
-        "best_epoch": best[1] if best else int(last["epoch"]),
-        "best_val_nodes_0.9": best[0] if best else None,
-        "epochs": len(rows),
-        "train_problems": len(train),
-        "train_configs": int(train.counts.sum()),
-        "val_problems": len(val),
-        "data_time_s": t_data,
-        "train_time_s": train_time,
-        "interrupted": interrupted,
+        **summary,
+        "best_epoch": run.best[1] if run.best else run.epoch,
+        "best_val_nodes_0.9": run.best[0] if run.best else None,
+        "train_problems": len(run.train),
+        "train_configs": int(run.train.counts.sum()),
+        "val_problems": len(run.val),
+        "train_time_s": run.train_time,
     }
 
 

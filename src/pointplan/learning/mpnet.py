@@ -26,9 +26,8 @@ as ``mpnet-nr`` and ``mpnet-hr``.
 from __future__ import annotations
 
 import copy
-import csv
-import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,7 +36,7 @@ import numpy as np
 import torch
 
 from ..evaluation import evaluate
-from ..models.checkpoint import save_checkpoint, to_dict
+from ..models.checkpoint import to_dict
 from ..models.mpnet import (
     OBSERVATION_3D,
     MPNet,
@@ -53,6 +52,7 @@ from ..planners.mpnet import MPNetPlanner, scene_points
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from .bc import Demos, generate_demos, load_demos, save_demos
+from .rundir import RunDir, load_trainer_state, say_interrupted_early
 
 
 @dataclass(frozen=True)
@@ -219,15 +219,19 @@ def validation_loss(model: MPNetModel, ps: PathSet, center: np.ndarray, step: fl
     return total / max(n, 1)
 
 
-def _demos(scenario: Scenario, n: int, split: str, path: str | None, cfg: MPNetTrainConfig, progress: bool, pool: Any = None) -> Demos:
+def _demos(
+    scenario: Scenario, n: int, split: str, path: str | None, cfg: MPNetTrainConfig, progress: bool, pool: Any = None, keep: Path | None = None
+) -> Demos:
+    """The demonstrations of ``split``: ``path``'s if it exists, else planned and written to
+    ``path`` (or ``keep``, the run folder's copy a resumed run reads back)."""
     if path and Path(path).exists():
         with np.load(path, allow_pickle=False) as f:
             if str(f["split"]) != split:
                 raise ValueError(f"{path}: demonstrations of the {f['split']} split, not {split}")
         return load_demos(path, scenario)
     demos = generate_demos(scenario, n, cfg.seed, progress=progress, split=split, workers=cfg.workers, pool=pool)
-    if path:
-        save_demos(path, scenario, demos, split, cfg.seed)
+    if path or keep:
+        save_demos(path or str(keep), scenario, demos, split, cfg.seed)
     return demos
 
 
@@ -243,117 +247,211 @@ class MPNetTrainResult:
     demo_time_s: float
     train_time_s: float
     summary: dict[str, Any] = field(default_factory=dict)
+    #: stopped by Ctrl-C (the trainer state is in ``last.pt``; no test ran)
+    interrupted: bool = False
 
 
-def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = True, pool: Any = None) -> MPNetTrainResult:
+class _MPNetRun:
+    """The data, the network and the counters of an MPNet training run (see :func:`train_mpnet`)."""
+
+    def __init__(self, cfg: MPNetTrainConfig, folder: RunDir, progress: bool, pool: Any, resume: str | Path | None) -> None:
+        self.cfg, self.folder = cfg, folder
+        torch.manual_seed(cfg.seed)
+        self.rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0x3B9E7]))
+        self.scenario = make_scenario(cfg.env, robot=cfg.robot)
+        robot = self.robot = self.scenario.robot
+        check_translating(robot)
+        self.observation = default_observation(robot)
+        self.n_points = int(cfg.n_points) if self.observation == OBSERVATION_3D else 0
+        low, high = self.scenario.bounds
+        self.center = (np.asarray(low) + np.asarray(high)) / 2
+        self.step = float(robot.action_scale[0])
+        t0 = time.perf_counter()
+        self.train_demos = self._demos(cfg.n_problems, "train", cfg.demos_file, progress, pool, resume is not None)
+        val_demos = self._demos(cfg.val_demo_problems, "val", cfg.val_demos_file, progress, pool, resume is not None)
+        self.train_set = make_path_set(self.train_demos, robot, self.center, self.step, cfg.waypoint_step, self.observation, self.n_points)
+        self.val_set = make_path_set(val_demos, robot, self.center, self.step, cfg.waypoint_step, self.observation, self.n_points)
+        self.val_problems = self.scenario.problems("val", cfg.val_problems, seed=cfg.seed)
+        self.demo_time = time.perf_counter() - t0
+        self.model = MPNetModel(robot.dim, 2 * robot.dim, cfg.net)
+        self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.lr)
+        self.sched = torch.optim.lr_scheduler.LambdaLR(
+            self.opt, lambda e: cfg.lr_end + (1.0 - cfg.lr_end) * 0.5 * (1.0 + float(np.cos(np.pi * min(e / max(cfg.epochs - 1, 1), 1.0))))
+        )
+        self.extra = {"train_config": to_dict(cfg), "demo_problems": len(self.train_demos.paths), "waypoints": int(len(self.train_set.waypoints))}
+        self.history: list[dict[str, float]] = []
+        self.best: tuple[float, float] | None = None
+        self.best_val: dict[str, float] = {}
+        self.best_epoch, self.epoch, self.train_before = 0, 0, 0.0
+        if resume is not None:
+            self._resume(resume)
+        self.t1 = time.perf_counter()
+
+    def _demos(self, n: int, split: str, path: str | None, progress: bool, pool: Any, resumed: bool) -> Demos:
+        keep = self.folder.path / f"demos_{split}.npz"
+        if not path and resumed and keep.exists():  # planned by the run resumed
+            path = str(keep)
+        return _demos(self.scenario, n, split, path, self.cfg, progress, pool, keep)
+
+    def _resume(self, path: str | Path) -> None:
+        state = load_trainer_state(path, "mpnet_trainer", "pointplan mpnet-train")
+        self.model.load_state_dict(state["model"])
+        t = state["mpnet_trainer"]
+        self.opt.load_state_dict(t["optimizer"])
+        self.sched.load_state_dict(t["scheduler"])
+        self.rng.bit_generator.state = t["rng"]
+        torch.set_rng_state(t["torch_rng"])
+        self.epoch, self.best_epoch, self.train_before = int(t["epoch"]), int(t["best_epoch"]), float(t["train_time_s"])
+        self.best = (float(t["best"][0]), float(t["best"][1])) if t["best"] is not None else None
+        self.best_val, self.history = dict(t["best_val"]), [dict(r) for r in t["history"]]
+        self.folder.metrics.drop_after(self.epoch)
+
+    @property
+    def train_time(self) -> float:
+        return self.train_before + time.perf_counter() - self.t1
+
+    def snapshot(self) -> MPNet:
+        return MPNet(copy.deepcopy(self.model).eval(), self.robot, self.center, self.step, {}, self.observation, self.n_points)
+
+    def train_epoch(self, ep: int, stop: Callable[[], bool]) -> dict[str, float] | None:
+        """One pass over the training paths; None when ``stop`` ended it early."""
+        cfg = self.cfg
+        self.model.train()
+        order = self.rng.permutation(self.train_set.n_demos)
+        total, n = 0.0, 0
+        for s in range(0, len(order), cfg.paths_per_batch):
+            loss, k = batch_loss(self.model, self.train_set, order[s : s + cfg.paths_per_batch], self.center, self.step, self.rng, cfg.subgoal_prob)
+            self.opt.zero_grad(set_to_none=True)
+            loss.backward()
+            self.opt.step()
+            total += float(loss.detach()) * k
+            n += k
+            if stop():
+                return None
+        row: dict[str, float] = {"epoch": ep, "lr": float(self.opt.param_groups[0]["lr"]), "train_loss": total / max(n, 1), "time_s": self.train_time}
+        self.sched.step()
+        self.epoch = ep
+        return row
+
+    def validate(self, row: dict[str, float]) -> None:
+        """The validation loss and the neural planner on validation problems; ``best.pt``
+        when the epoch is the best so far (success, then validation loss)."""
+        row["val_loss"] = validation_loss(self.model, self.val_set, self.center, self.step)
+        report = evaluate(MPNetPlanner(self.snapshot(), self.robot, seed=self.cfg.seed), self.val_problems, self.robot, progress=False)
+        if report.interrupted:  # (a second Ctrl-C): a partial validation selects nothing
+            raise KeyboardInterrupt
+        m = report.metrics()
+        row.update(val_success=m["success_rate"], val_nodes=m["nodes_mean"], val_checks=m["collision_checks_mean"], val_path_length=m["path_length_mean"])
+        key = (row["val_success"], -row["val_loss"])
+        if self.best is None or key > self.best:
+            self.best, self.best_epoch, self.best_val = key, int(row["epoch"]), dict(row)
+            self.folder.save("best.pt", self.payload(val={k: float(v) for k, v in row.items()}))
+
+    def payload(self, **extra: Any) -> dict[str, Any]:
+        return mpnet_payload(
+            self.model, self.scenario.name, self.robot, self.center, self.step, self.observation, self.n_points, epoch=self.epoch, **self.extra, **extra
+        )
+
+    def save_last(self, **extra: Any) -> None:
+        """``last.pt``: the network (an MPNet checkpoint) with the trainer state to resume from."""
+        state = {
+            "epoch": self.epoch,
+            "optimizer": self.opt.state_dict(),
+            "scheduler": self.sched.state_dict(),
+            "rng": self.rng.bit_generator.state,
+            "torch_rng": torch.get_rng_state(),
+            "best": list(self.best) if self.best is not None else None,
+            "best_epoch": self.best_epoch,
+            "best_val": _plain(self.best_val),
+            "history": [_plain(r) for r in self.history],
+            "train_time_s": self.train_time,
+        }
+        self.folder.save("last.pt", {**self.payload(**extra), "mpnet_trainer": state})
+
+    def test(self, progress: bool) -> dict[str, dict[str, Any]]:
+        """The best model on the test problems, as mpnet-nr and mpnet-hr."""
+        out: dict[str, dict[str, Any]] = {}
+        if self.cfg.test_problems > 0:
+            best_net = MPNet.from_checkpoint(self.folder.path / "best.pt")
+            problems = self.scenario.problems("test", self.cfg.test_problems, seed=self.cfg.seed)
+            for hybrid in (False, True):
+                planner = MPNetPlanner(best_net, self.robot, hybrid=hybrid, seed=self.cfg.seed, max_nodes=self.cfg.max_nodes)
+                out[planner.name] = evaluate(planner, problems, self.robot, progress=progress).metrics()
+        return out
+
+
+def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = True, pool: Any = None, resume: str | Path | None = None) -> MPNetTrainResult:
     """Train on the training split, select on the validation split, test once. Writes
-    ``best.pt``, ``last.pt``, ``metrics.csv`` and ``summary.json`` to ``run_dir``. The
+    ``best.pt``, ``last.pt`` (the trainer state, also on Ctrl-C; ``resume`` continues from
+    it), ``metrics.csv``, TensorBoard logs and ``summary.json`` to ``run_dir``. The
     demonstrations are planned on ``pool`` if given (see :func:`~.bc.generate_demos`)."""
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0x3B9E7]))
-    scenario = make_scenario(cfg.env, robot=cfg.robot)
-    robot = scenario.robot
-    check_translating(robot)
-    observation = default_observation(robot)
-    n_points = int(cfg.n_points) if observation == OBSERVATION_3D else 0
-    low, high = scenario.bounds
-    center = (np.asarray(low) + np.asarray(high)) / 2
-    step = float(robot.action_scale[0])
-
-    t0 = time.perf_counter()
-    train_demos = _demos(scenario, cfg.n_problems, "train", cfg.demos_file, cfg, progress, pool)
-    val_demos = _demos(scenario, cfg.val_demo_problems, "val", cfg.val_demos_file, cfg, progress, pool)
-    train_set = make_path_set(train_demos, robot, center, step, cfg.waypoint_step, observation, n_points)
-    val_set = make_path_set(val_demos, robot, center, step, cfg.waypoint_step, observation, n_points)
-    val_problems = scenario.problems("val", cfg.val_problems, seed=cfg.seed)
-    demo_time = time.perf_counter() - t0
-
-    model = MPNetModel(robot.dim, 2 * robot.dim, cfg.net)
-    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    sched = torch.optim.lr_scheduler.LambdaLR(
-        opt, lambda e: cfg.lr_end + (1.0 - cfg.lr_end) * 0.5 * (1.0 + np.cos(np.pi * min(e / max(cfg.epochs - 1, 1), 1.0)))
-    )
-    extra = {"train_config": to_dict(cfg), "demo_problems": len(train_demos.paths), "waypoints": int(len(train_set.waypoints))}
-
-    def snapshot(m: MPNetModel) -> MPNet:
-        return MPNet(copy.deepcopy(m).eval(), robot, center, step, {}, observation, n_points)
-
-    history: list[dict[str, float]] = []
-    best: tuple[float, float] | None = None
-    best_epoch, best_val = 0, {}
-    t1 = time.perf_counter()
-    epochs: Any = range(1, cfg.epochs + 1)
+    folder = RunDir(run_dir, "pointplan mpnet-train")
+    try:
+        run = _MPNetRun(cfg, folder, progress, pool, resume)
+    except KeyboardInterrupt:
+        say_interrupted_early("planning the demonstrations")
+        return MPNetTrainResult(folder.path, 0, {}, [], {}, 0.0, 0.0, interrupted=True)
+    if run.epoch >= cfg.epochs:
+        raise ValueError(f"{resume}: the run has done its {run.epoch} epochs; give --epochs above that to continue it")
+    epochs: Any = range(run.epoch + 1, cfg.epochs + 1)
     if progress:
         from tqdm import tqdm
 
-        epochs = tqdm(epochs, desc="mpnet", unit="epoch")
-    model.train()
-    for ep in epochs:
-        order = rng.permutation(train_set.n_demos)
-        total, n = 0.0, 0
-        for s in range(0, len(order), cfg.paths_per_batch):
-            loss, k = batch_loss(model, train_set, order[s : s + cfg.paths_per_batch], center, step, rng, cfg.subgoal_prob)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            total += float(loss.detach()) * k
-            n += k
-        row: dict[str, float] = {"epoch": ep, "lr": float(opt.param_groups[0]["lr"]), "train_loss": total / max(n, 1), "time_s": time.perf_counter() - t1}
-        sched.step()
-        if ep % cfg.eval_every == 0 or ep == cfg.epochs:
-            row["val_loss"] = validation_loss(model, val_set, center, step)
-            planner = MPNetPlanner(snapshot(model), robot, seed=cfg.seed)
-            m = evaluate(planner, val_problems, robot, progress=False).metrics()
-            row.update(val_success=m["success_rate"], val_nodes=m["nodes_mean"], val_checks=m["collision_checks_mean"], val_path_length=m["path_length_mean"])
-            key = (row["val_success"], -row["val_loss"])
-            payload = mpnet_payload(
-                model, scenario.name, robot, center, step, observation, n_points, epoch=ep, val={k: float(v) for k, v in row.items()}, **extra
-            )
-            if best is None or key > best:
-                best, best_epoch, best_val = key, ep, dict(row)
-                save_checkpoint(run_dir / "best.pt", payload)
-            save_checkpoint(run_dir / "last.pt", payload)
-        history.append(row)
-        _write_csv(run_dir / "metrics.csv", history)
-        if progress:
-            post = {"loss": f"{row['train_loss']:.3f}"}
+        epochs = tqdm(epochs, desc="mpnet", unit="epoch", total=cfg.epochs, initial=run.epoch)
+    with folder.ctrl_c() as stop:
+        for ep in epochs:
+            row = run.train_epoch(ep, stop)
+            if row is None:
+                break
+            if ep % cfg.eval_every == 0 or ep == cfg.epochs:
+                run.validate(row)
+            run.history.append(row)
+            folder.log(row)
             if "val_success" in row:
-                post.update(val=f"{row['val_success']:.3f}", best=f"{best_val.get('val_success', 0):.3f}@{best_epoch}")
-            epochs.set_postfix(post)
-    train_time = time.perf_counter() - t1
+                run.save_last(val={k: float(v) for k, v in row.items()})
+            if progress:
+                post = {"loss": f"{row['train_loss']:.3f}"}
+                if "val_success" in row:
+                    post.update(val=f"{row['val_success']:.3f}", best=f"{run.best_val['val_success']:.3f}@{run.best_epoch}")
+                epochs.set_postfix(post)
+            if stop():
+                break
+    if progress:
+        epochs.close()
+    if run.epoch < cfg.epochs:
+        folder.interrupted(f"in epoch {run.epoch + 1} of {cfg.epochs}", run.save_last, _mpnet_note(run.best_val, run.best_epoch))
+        folder.close()
+        return MPNetTrainResult(folder.path, run.best_epoch, run.best_val, run.history, {}, run.demo_time, run.train_time, interrupted=True)
+    return _finish_mpnet(run, progress)
 
-    test: dict[str, dict[str, Any]] = {}
-    if cfg.test_problems > 0:
-        best_net = MPNet.from_checkpoint(run_dir / "best.pt")
-        problems = scenario.problems("test", cfg.test_problems, seed=cfg.seed)
-        for hybrid in (False, True):
-            planner = MPNetPlanner(best_net, robot, hybrid=hybrid, seed=cfg.seed, max_nodes=cfg.max_nodes)
-            test[planner.name] = evaluate(planner, problems, robot, progress=progress).metrics()
+
+def _plain(row: dict[str, Any]) -> dict[str, Any]:
+    """A metrics row with numpy scalars as Python numbers (for a checkpoint)."""
+    return {k: (v.item() if hasattr(v, "item") else v) for k, v in row.items()}
+
+
+def _mpnet_note(best_val: dict[str, float], epoch: int) -> str:
+    return f"best validation success {best_val['val_success']:.3f} at epoch {epoch}" if best_val else "no validation yet"
+
+
+def _finish_mpnet(run: _MPNetRun, progress: bool) -> MPNetTrainResult:
+    """The test of the best model and ``summary.json``."""
+    train_time = run.train_time
+    test = run.test(progress)
     summary = {
-        "config": to_dict(cfg),
-        "run_dir": str(run_dir),
-        "best_epoch": best_epoch,
-        "best_val": best_val,
-        "demo_problems": len(train_demos.paths),
-        "training_samples_per_epoch": int(len(train_set.waypoints) - len(train_set.offset)),
-        "demo_time_s": demo_time,
+        "config": to_dict(run.cfg),
+        "run_dir": str(run.folder.path),
+        "best_epoch": run.best_epoch,
+        "best_val": run.best_val,
+        "demo_problems": len(run.train_demos.paths),
+        "training_samples_per_epoch": int(len(run.train_set.waypoints) - len(run.train_set.offset)),
+        "demo_time_s": run.demo_time,
         "train_time_s": train_time,
         "test": test,
     }
-    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    return MPNetTrainResult(run_dir, best_epoch, best_val, history, test, demo_time, train_time, summary)
-
-
-def _write_csv(path: Path, rows: list[dict[str, float]]) -> None:
-    keys: list[str] = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    with path.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)
+    run.folder.write_json("summary.json", summary)
+    run.folder.close()
+    return MPNetTrainResult(run.folder.path, run.best_epoch, run.best_val, run.history, test, run.demo_time, train_time, summary)
 
 
 __all__ = ["MPNetTrainConfig", "MPNetTrainResult", "cut_path", "path_vertices", "train_mpnet"]

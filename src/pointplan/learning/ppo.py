@@ -20,7 +20,6 @@ escape; ``best.pt`` keeps the best by the chosen criterion, ``last.pt`` the trai
 from __future__ import annotations
 
 import math
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,11 +32,12 @@ from torch import nn
 from ..config import from_dict
 from ..envs.core import BatchedCore, EnvConfig
 from ..models.actor_critic import Actor, NetConfig
-from ..models.checkpoint import CheckpointError, load_checkpoint, save_checkpoint, to_dict
+from ..models.checkpoint import CheckpointError, load_checkpoint, to_dict
 from ..models.encoders import make_encoder, mlp
 from ..models.inputs import goal_input, obs_input
 from ..scenes.scenarios import make_scenario
 from ..scenes.scene import Problem
+from .rundir import RunDir, best_note, best_or_none
 
 
 @dataclass(frozen=True)
@@ -52,7 +52,8 @@ class PPOConfig:
     num_envs: int = field(default=32, metadata={"min": 1})
     #: steps of every environment per iteration (one batch of num_envs x rollout_steps transitions)
     rollout_steps: int = field(default=80, metadata={"min": 1})
-    #: environment transitions to collect
+    #: environment transitions to collect; the last rollout is cut short to stop here (rounded
+    #: up to a multiple of num_envs, which step together)
     total_steps: int = field(default=2_000_000, metadata={"min": 1})
     #: passes over each batch
     epochs: int = field(default=4, metadata={"min": 1})
@@ -93,7 +94,7 @@ class PPOConfig:
     #: end an episode as solved once the straight edge to the goal is certified free, as the
     #: planner does (``PolicyPlanner(greedy_goal=True)``; static scenes); validation too
     greedy_goal: bool = False
-    #: a demonstrations file (``pointplan bc --save-demos``, or ``slot_canonical_expert.py
+    #: a demonstrations file (``pointplan bc --save-demos``, or ``scripts/slot_expert.py demos
     #: demos``) of this scenario: a share of the episodes start on its paths, a few steps
     #: before their goal, and further back as they succeed (a reverse curriculum)
     start_demos: str = ""
@@ -176,9 +177,10 @@ class _Batch:
 class PPORun:
     """The pieces of a PPO run and its counters (built by :func:`train_ppo`)."""
 
-    def __init__(self, cfg: PPOConfig, run_dir: Path, resume: str | Path | None) -> None:
+    def __init__(self, cfg: PPOConfig, run_dir: Path | RunDir, resume: str | Path | None) -> None:
         self.cfg = cfg
-        self.run_dir = run_dir
+        self.folder = run_dir if isinstance(run_dir, RunDir) else RunDir(run_dir, "pointplan ppo")
+        self.run_dir = self.folder.path
         init = load_checkpoint(resume if resume is not None else cfg.init_actor, cfg.device)
         self.meta = {k: init[k] for k in ("env", "robot", "observation", "n_points", "obs_shape", "net")}
         if cfg.env:
@@ -309,10 +311,10 @@ class PPORun:
         return torch.as_tensor(np.asarray(x, np.float32), device=self.device)
 
     # ------------------------------------------------------------------ collection
-    def collect(self) -> _Batch:
-        """``rollout_steps`` steps of every environment with sampled actions."""
+    def collect(self, steps: int | None = None) -> _Batch:
+        """``steps`` (default ``rollout_steps``) steps of every environment with sampled actions."""
         cfg, core, robot = self.cfg, self.core, self.robot
-        T, E = cfg.rollout_steps, cfg.num_envs
+        T, E = steps or cfg.rollout_steps, cfg.num_envs
         obs_b = np.zeros((T, E) + self.obs_shape, np.float32)
         goal_b = np.zeros((T, E, robot.twist_dim), np.float32)
         u_b = np.zeros((T, E, robot.twist_dim), np.float32)
@@ -410,7 +412,7 @@ class PPORun:
             if actor_on and cfg.target_kl > 0 and kls and np.mean(kls) > cfg.target_kl:
                 actor_on = False  # the value network finishes its epochs alone
         self.iterations += 1
-        return {k: float(np.mean(v)) if v else float("nan") for k, v in stats.items()}
+        return {k: float(np.mean(v)) for k, v in stats.items() if v}  # (the actor's are missing while it is frozen)
 
     # ------------------------------------------------------------------ validation
     def validate(self) -> dict[str, float]:
@@ -474,24 +476,51 @@ class PPORun:
             if row[key] > self.best:
                 self.best = row[key]
                 state["best"] = self.best
-                save_checkpoint(self.run_dir / "best.pt", {**payload, "val_success": row["val_success"], **{k: row[k] for k in row if k.startswith("val_")}})
-        save_checkpoint(self.run_dir / "last.pt", {**payload, "ppo": state})
+                self.folder.save("best.pt", {**payload, "val_success": row["val_success"], **{k: row[k] for k in row if k.startswith("val_")}})
+        self.folder.save("last.pt", {**payload, "ppo": state})
+
+    def next_rollout(self) -> int:
+        """Steps of every environment in the next iteration: ``rollout_steps``, fewer for
+        the last one, so that the run stops at ``total_steps`` (rounded up to a multiple of
+        ``num_envs``)."""
+        left = self.cfg.total_steps - self.steps
+        return max(1, min(self.cfg.rollout_steps, -(-left // self.cfg.num_envs)))
+
+    def row(self, losses: dict[str, float]) -> dict[str, float]:
+        """The metrics of a validation now: counters, validation, training success, curriculum, losses."""
+        row = {"env_steps": float(self.steps), "iterations": float(self.iterations), "wall_time_s": self.wall}
+        row.update(self.validate())
+        row["train_success"] = float(np.mean(self.recent)) if self.recent else 0.0
+        if self.demo_paths:
+            row["start_back"] = float(self.back)
+            row["demo_start_success"] = float(np.mean(self.recent_demo)) if self.recent_demo else 0.0
+            if self.frontier:
+                row["frontier_success"] = float(np.mean(self.frontier))
+        row.update(losses)
+        return row
+
+    def postfix(self) -> dict[str, str]:
+        """The progress bar's figures."""
+        post = {"train_success": f"{np.mean(self.recent) if self.recent else 0:.2f}"}
+        if self.best >= 0:
+            post["best"] = f"{self.best:.3f}"
+        if self.demo_paths:
+            post.update(back=str(self.back), demo_success=f"{np.mean(self.recent_demo) if self.recent_demo else 0:.2f}")
+        return post
 
 
 def train_ppo(cfg: PPOConfig, run_dir: str | Path, resume: str | Path | None = None, progress: bool = True) -> dict[str, Any]:
     """Fine-tune ``cfg.init_actor`` (or continue ``resume``'s run) with PPO; checkpoints
-    ``best.pt`` and ``last.pt`` and ``metrics.csv`` in ``run_dir``. Ctrl-C stops after the
-    current iteration and saves the trainer state. Returns a summary."""
-    from .train import _Logger, _StopOnCtrlC
-
+    ``best.pt`` and ``last.pt``, ``metrics.csv`` and TensorBoard logs in ``run_dir``. Ctrl-C
+    stops after the current iteration and saves the trainer state. Returns a summary."""
     if not cfg.init_actor and resume is None:
         raise ValueError("PPO fine-tunes a policy: give init_actor (a checkpoint, e.g. from `pointplan bc`)")
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    run = PPORun(cfg, run_dir, resume)
+    folder = RunDir(run_dir, "pointplan ppo")
+    run = PPORun(cfg, folder, resume)
     if run.steps >= cfg.total_steps:
         raise ValueError(f"{resume}: the run has done {run.steps} steps already; set total_steps above that to continue it")
-    logger = _Logger(run_dir)
+    if resume is not None:
+        folder.metrics.drop_after(run.steps)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -499,39 +528,29 @@ def train_ppo(cfg: PPOConfig, run_dir: str | Path, resume: str | Path | None = N
         bar = tqdm(total=cfg.total_steps, initial=run.steps, unit="step", dynamic_ncols=True)
     if run.steps == 0:  # the starting policy, for the curve
         row = {"env_steps": 0.0, "iterations": 0.0, "wall_time_s": run.wall, **run.validate()}
-        logger.log(row)
+        folder.log(row)
         run.history.append(row)
         if bar is not None:
-            bar.write(f"start: {row}")
-    with _StopOnCtrlC(enabled=True) as ctrl_c:
+            bar.write("start: " + " ".join(f"{k}={v:.4g}" for k, v in row.items()))
+    with folder.ctrl_c() as ctrl_c:
         while run.steps < cfg.total_steps and not ctrl_c.requested:
             before = run.steps
-            batch = run.collect()
-            losses = run.update(batch)
+            losses = run.update(run.collect(run.next_rollout()))
             if bar is not None:
-                bar.update(run.steps - before)
-                post = {"train_success": f"{np.mean(run.recent) if run.recent else 0:.2f}", "best": f"{max(run.best, 0):.3f}"}
-                if run.demo_paths:
-                    post.update(back=str(run.back), demo_success=f"{np.mean(run.recent_demo) if run.recent_demo else 0:.2f}")
-                bar.set_postfix(**post)
+                bar.update(min(run.steps, cfg.total_steps) - min(before, cfg.total_steps))
+                bar.set_postfix(run.postfix())
             if run.steps >= run.next_eval or run.steps >= cfg.total_steps:
                 run.next_eval += cfg.eval_every
-                row = {"env_steps": float(run.steps), "iterations": float(run.iterations), "wall_time_s": run.wall}
-                row.update(run.validate())
-                row["train_success"] = float(np.mean(run.recent)) if run.recent else 0.0
-                if run.demo_paths:
-                    row["start_back"] = float(run.back)
-                    row["demo_start_success"] = float(np.mean(run.recent_demo)) if run.recent_demo else 0.0
-                    row["frontier_success"] = float(np.mean(run.frontier)) if run.frontier else float("nan")
-                row.update(losses)
-                logger.log(row)
+                row = run.row(losses)
+                folder.log(row)
                 run.history.append(row)
                 run.save(row)
                 if bar is not None:
                     bar.write(" ".join(f"{k}={v:.4g}" for k, v in row.items()))
     if bar is not None:
         bar.close()
+    best = best_or_none(run.best)
     if ctrl_c.requested:
-        run.save(None)
-        print(f"\ninterrupted at step {run.steps}: trainer state saved to {run_dir / 'last.pt'} (continue with --resume)", file=sys.stderr)
-    return {"run_dir": str(run_dir), "best_success": run.best, "steps": run.steps, "wall_time_s": run.wall, "interrupted": ctrl_c.requested}
+        folder.interrupted(f"at step {run.steps}", lambda: run.save(None), best_note(best))
+    folder.close()
+    return {"run_dir": str(run.run_dir), "best_success": best, "steps": run.steps, "wall_time_s": run.wall, "interrupted": ctrl_c.requested}

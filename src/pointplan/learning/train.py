@@ -9,11 +9,7 @@ are kept in the run directory with ``metrics.csv`` and TensorBoard logs.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import signal
-import sys
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -26,14 +22,18 @@ import torch
 from ..config import from_dict
 from ..envs.core import BatchedCore, EnvConfig
 from ..models.actor_critic import NetConfig
-from ..models.checkpoint import CheckpointError, load_checkpoint, save_checkpoint, to_dict
+from ..models.checkpoint import CheckpointError, load_checkpoint, to_dict
 from ..models.encoders import EncoderConfig
 from ..parallel import RolloutSource, backend, wants_workers
 from ..scenes.scenarios import make_scenario
 from ..scenes.scene import Problem
 from .curriculum import EpisodeSource, FailurePool
 from .replay import Batch, EpisodeReplay
+from .rundir import MetricsLog, RunDir, best_note, best_or_none
 from .sac import SAC, DemoBatch, SACConfig
+
+#: the metrics log of a run folder (``metrics.csv`` and TensorBoard)
+_Logger = MetricsLog
 
 
 @dataclass(frozen=True)
@@ -93,52 +93,14 @@ class TrainConfig:
 @dataclass
 class TrainResult:
     run_dir: Path
-    best_success: float
+    #: the best validation success, None before the first validation
+    best_success: float | None
     steps: int
     wall_time_s: float
     history: list[dict[str, float]]
     #: stopped by Ctrl-C: in one process after saving the trainer state at the current step
     #: to ``last.pt``; with Ray workers after a last validation and checkpoint
     interrupted: bool = False
-
-
-class _Logger:
-    def __init__(self, run_dir: Path) -> None:
-        self.path = run_dir / "metrics.csv"
-        self.rows: list[dict[str, float]] = []
-        self.tb: Any = None
-        try:
-            from torch.utils.tensorboard import SummaryWriter
-
-            self.tb = SummaryWriter(str(run_dir / "tb"))
-        except Exception:  # tensorboard missing: CSV only
-            self.tb = None
-
-    def log(self, row: dict[str, float]) -> None:
-        self.rows.append(row)
-        old: list[dict[str, str]] = []
-        keys = list(row)
-        if self.path.exists():  # e.g. a run resumed into its own folder: keep its columns
-            with self.path.open(newline="") as f:
-                reader = csv.DictReader(f)
-                header = list(reader.fieldnames or [])
-                if set(keys) <= set(header):
-                    keys = header
-                else:  # new columns (an option turned on at resume): rewrite with all of them
-                    old = list(reader)
-                    keys = header + [k for k in keys if k not in header]
-        rewrite = bool(old) or not self.path.exists()
-        with self.path.open("w" if rewrite else "a", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore", restval="")
-            if rewrite:
-                w.writeheader()
-                w.writerows(old)
-            w.writerow(row)
-        if self.tb is not None:
-            for k, v in row.items():
-                if k != "env_steps":
-                    self.tb.add_scalar(k, v, int(row["env_steps"]))
-            self.tb.flush()
 
 
 def _checkpoint_payload(cfg: TrainConfig, agent: SAC, obs_shape: tuple[int, ...], robot_name: str, extra: dict[str, Any]) -> dict[str, Any]:
@@ -173,6 +135,7 @@ def train(
     a Ray cluster ``address`` (the default back end's rollout workers, which broadcast the
     actor every ``sync_every`` updates), the ``num_envs`` environments are stepped elsewhere
     and this process learns from the episodes they send."""
+    folder = RunDir(run_dir, "pointplan train")  # before any work: a folder that cannot be used is an error now
     if rollouts is None and wants_workers(workers, address):
         rollouts = backend().rollouts(workers, address, sync_every)
     remote = None
@@ -181,7 +144,7 @@ def train(
             raise ValueError("--retry-failures runs in one process for now: drop --workers/--address to use it")
         remote = rollouts(cfg)
     try:
-        res = _train(cfg, run_dir, progress, resume, on_eval, remote)
+        res = _train(cfg, folder, progress, resume, on_eval, remote)
         res.interrupted = res.interrupted or bool(remote is not None and remote.interrupted)
         return res
     finally:
@@ -194,7 +157,7 @@ class _Run:
     """What the training loop reads and updates: the pieces of the run and its counters."""
 
     cfg: TrainConfig
-    run_dir: Path
+    folder: RunDir
     scenario: Any
     core: BatchedCore
     env_cfg: EnvConfig
@@ -225,6 +188,10 @@ class _Run:
     demo_buffer: Any = None
 
     @property
+    def run_dir(self) -> Path:
+        return self.folder.path
+
+    @property
     def wall(self) -> float:
         return self.elapsed_before + time.perf_counter() - self.t_start
 
@@ -233,9 +200,8 @@ class _Run:
         return self.steps < self.cfg.warmup_steps and self.cfg.init_actor is None
 
 
-def _start(cfg: TrainConfig, run_dir: Path, resume: str | Path | None, remote: Any) -> _Run:
+def _start(cfg: TrainConfig, folder: RunDir, resume: str | Path | None, remote: Any) -> _Run:
     """Build the environments, the agent and the buffer; restore ``resume``'s trainer state."""
-    run_dir.mkdir(parents=True, exist_ok=True)
     scenario = make_scenario(cfg.env, robot=cfg.robot)
     env_cfg = EnvConfig(observation=cfg.observation, n_points=cfg.n_points, split="train", action_cost=cfg.action_cost)
     core = BatchedCore(scenario, cfg.num_envs, env_cfg)
@@ -243,7 +209,7 @@ def _start(cfg: TrainConfig, run_dir: Path, resume: str | Path | None, remote: A
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     agent = SAC(scenario.robot, env_cfg, obs_shape, cfg.net, cfg.sac, cfg.device)
-    run = _Run(cfg, run_dir, scenario, core, env_cfg, obs_shape, rng, agent)
+    run = _Run(cfg, folder, scenario, core, env_cfg, obs_shape, rng, agent)
     if cfg.init_actor and resume is None:  # a resumed run has its own actor already
         agent.load_actor(load_checkpoint(cfg.init_actor, cfg.device)["actor"])
     if resume is not None:
@@ -254,7 +220,9 @@ def _start(cfg: TrainConfig, run_dir: Path, resume: str | Path | None, remote: A
     run.buffer = EpisodeReplay(int(min(cfg.sac.buffer_size, max(cfg.total_steps, 10_000))), obs_shape, robot.config_dim, robot.twist_dim)
     run.buffer.track(cfg.num_envs, core.horizon)
     run.val_problems = scenario.problems("val", cfg.eval_episodes, seed=cfg.seed)
-    run.logger = _Logger(run_dir)
+    run.logger = folder.metrics
+    if resume is not None:  # rows logged after that state was saved are logged again
+        run.logger.drop_after(run.steps)
     if cfg.retry_failures > 0 or cfg.mine_episodes > 0:
         run.pool = FailurePool(cfg.pool_size, cfg.pool_retries)
     run.source = EpisodeSource(core, run.pool, cfg.retry_failures)
@@ -476,10 +444,10 @@ def _save(run: _Run, row: dict[str, float], nodes_all: float) -> None:
     state = _trainer_state(run, wall, max(run.best, val), nodes_all if improved else run.best_nodes)
     extra = {"env_steps": run.steps, "val_success": val, "wall_time_s": wall, "horizon": run.core.horizon}
     payload = _checkpoint_payload(run.cfg, run.agent, run.obs_shape, run.scenario.robot.name, extra)
-    save_checkpoint(run.run_dir / "last.pt", {**payload, "trainer": state})
+    run.folder.save("last.pt", {**payload, "trainer": state})
     if improved:
         run.best, run.best_nodes = val, nodes_all
-        save_checkpoint(run.run_dir / "best.pt", payload)
+        run.folder.save("best.pt", payload)
 
 
 def _evaluate(run: _Run, on_eval: Callable[[dict[str, float]], None] | None, bar: Any) -> float:
@@ -499,57 +467,38 @@ def _progress(run: _Run, bar: Any, collected: int) -> None:
     if bar is not None:
         bar.update(max(0, min(collected, bar.total - bar.n)))  # the last step may overshoot the total
         if run.recent:
-            bar.set_postfix(train_success=f"{np.mean(run.recent):.2f}", best_val=f"{max(run.best, 0):.3f}", updates=run.agent.updates)
+            post = {"train_success": f"{np.mean(run.recent):.2f}", "updates": run.agent.updates}
+            if run.best >= 0:
+                post["best_val"] = f"{run.best:.3f}"
+            bar.set_postfix(post)
 
 
-class _StopOnCtrlC:
-    """Ctrl-C (SIGINT) asks the loop to stop after the current step; a second one stops at once."""
-
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled and threading.current_thread() is threading.main_thread()
-        self.requested = False
-        self._old: Any = None
-
-    def __enter__(self) -> _StopOnCtrlC:
-        if self.enabled:
-            self._old = signal.signal(signal.SIGINT, self._on_sigint)
-        return self
-
-    def _on_sigint(self, signum: int, frame: Any) -> None:
-        if self.requested:
-            raise KeyboardInterrupt
-        self.requested = True
-
-    def __exit__(self, *exc: object) -> None:
-        if self.enabled:
-            signal.signal(signal.SIGINT, self._old)
-
-
-def _save_interrupted(run: _Run) -> None:
+def _save_last(run: _Run) -> None:
     """``last.pt`` with the trainer state at the current step (no validation)."""
     wall = run.wall
-    val = run.history[-1]["val_success"] if run.history else float("nan")
-    extra = {"env_steps": run.steps, "val_success": val, "wall_time_s": wall, "horizon": run.core.horizon}
+    extra: dict[str, Any] = {"env_steps": run.steps, "wall_time_s": wall, "horizon": run.core.horizon}
+    if run.history:
+        extra["val_success"] = run.history[-1]["val_success"]
     payload = _checkpoint_payload(run.cfg, run.agent, run.obs_shape, run.scenario.robot.name, extra)
-    save_checkpoint(run.run_dir / "last.pt", {**payload, "trainer": _trainer_state(run, wall, run.best, run.best_nodes)})
-    print(f"\ninterrupted at step {run.steps}: trainer state saved to {run.run_dir / 'last.pt'} (continue with --resume)", file=sys.stderr)
+    run.folder.save("last.pt", {**payload, "trainer": _trainer_state(run, wall, run.best, run.best_nodes)})
 
 
 def _train(
     cfg: TrainConfig,
-    run_dir: str | Path,
+    folder: RunDir,
     progress: bool,
     resume: str | Path | None,
     on_eval: Callable[[dict[str, float]], None] | None,
     remote: Any,
 ) -> TrainResult:
-    run = _start(cfg, Path(run_dir), resume, remote)
+    run = _start(cfg, folder, resume, remote)
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=cfg.total_steps, initial=run.steps, unit="step", dynamic_ncols=True)
-    with _StopOnCtrlC(enabled=remote is None) as ctrl_c:  # (Ray rollouts handle Ctrl-C themselves)
+    stop_now = False
+    with folder.ctrl_c(enabled=remote is None) as ctrl_c:  # (Ray rollouts handle Ctrl-C themselves)
         while run.steps < cfg.total_steps and not ctrl_c.requested:
             stop_now = remote is not None and remote.interrupted
             collected = _collect(run) if remote is None else _collect_remote(run, remote)
@@ -563,6 +512,10 @@ def _train(
                 break
     if bar is not None:
         bar.close()
-    if ctrl_c.requested:
-        _save_interrupted(run)
-    return TrainResult(run_dir=run.run_dir, best_success=run.best, steps=run.steps, wall_time_s=run.wall, history=run.history, interrupted=ctrl_c.requested)
+    if ctrl_c.requested or stop_now:  # (with Ray workers the last validation saved the state)
+        folder.interrupted(f"at step {run.steps}", (lambda: _save_last(run)) if ctrl_c.requested else (lambda: None), best_note(best_or_none(run.best)))
+    folder.close()
+    interrupted = ctrl_c.requested or stop_now
+    return TrainResult(
+        run_dir=run.run_dir, best_success=best_or_none(run.best), steps=run.steps, wall_time_s=run.wall, history=run.history, interrupted=interrupted
+    )

@@ -14,7 +14,8 @@ from .base import Array, Observer, PointSetObserver
 
 
 class SurfacePoints(PointSetObserver):
-    """Points on obstacle boundaries (2D: box edges; 3D: faces), thinned to ``spacing``."""
+    """Points on obstacle boundaries (2D: the outlines of boxes, discs and capsules; 3D:
+    their surfaces), about ``spacing`` apart."""
 
     name = "surface"
     with_normals = False

@@ -40,6 +40,8 @@ from numpy.typing import NDArray
 from ..geometry import lie
 from ..geometry.clouds import DEFAULT_K, POINT_FILE_SUFFIXES, CloudError, check_normals, depth_to_points, estimate_normals, read_depth_image, read_point_file
 from ..geometry.shapes import Box, Capsule, Cylinder, Mesh, PointCloud, Shape, Sphere
+from ..robots.base import Robot
+from .base import FixedScenario
 from .scene import Problem, Scene
 
 Array = NDArray[np.float64]
@@ -462,15 +464,17 @@ def load_points_scene(
     pad: float = 0.1,
     k: int = DEFAULT_K,
     viewpoint: Sequence[float] | None = None,
+    include: Sequence[Sequence[float] | np.ndarray] = (),
 ) -> Scene:
     """A scene made of one point file (``.ply``, ``.pcd``, ``.npy``, ``.xyz``, ...), as a
     ``points`` obstacle of a scene file would read it (normals estimated when the file has
     none).
 
     ``dim`` defaults to 2 for a cloud of 2 columns or a flat one (z = 0 everywhere), else
-    3. ``bounds`` is ``(low, high)``; without it the cloud's bounding box is grown by
-    ``pad`` times its largest side on every side. Errors are :class:`SceneFormatError`
-    naming the file.
+    3. ``bounds`` is ``(low, high)``; without it the bounding box of the cloud and of the
+    positions in ``include`` (the first ``dim`` numbers of each, e.g. a start and a goal)
+    is grown by ``pad`` times its largest side on every side. Errors are
+    :class:`SceneFormatError` naming the file.
     """
     path = Path(path)
     name = str(path)
@@ -488,7 +492,9 @@ def load_points_scene(
         entry["viewpoint"] = [float(x) for x in viewpoint]
     cloud = reader.points_obstacle(entry, "", dim)
     if bounds is None:
-        lo, hi = cloud.points.min(0), cloud.points.max(0)
+        extra = [np.asarray(q, np.float64).reshape(-1)[:dim] for q in include if np.asarray(q).size >= dim]
+        box = np.concatenate([cloud.points, np.reshape(extra, (-1, dim))])
+        lo, hi = box.min(0), box.max(0)
         margin = pad * max(float(np.max(hi - lo)), 1e-3)
         low, high = lo - margin, hi + margin
     else:
@@ -496,6 +502,124 @@ def load_points_scene(
         if low.shape != (dim,) or high.shape != (dim,) or np.any(high <= low):
             raise SceneFormatError(name, "bounds", f"expected {dim} numbers low and high with low < high, got {low.tolist()} and {high.tolist()}")
     return Scene(obstacles=[cloud], low=low, high=high, name=path.stem)
+
+
+# ============================================================================ enclosed regions
+class EnclosedRegions:
+    """Where the points of a 2D cloud wall free space in (the inside of an obstacle scanned
+    as its outline, say).
+
+    The points are rasterised on a grid over the bounds with cells of twice their typical
+    spacing (the median nearest-neighbour distance; at most 2048 cells a side), free cells
+    are flood-filled (4-connected) from the bounds' border, and the free cells the fill does
+    not reach are enclosed. A position in a cell holding points is judged from the side of
+    the nearest point it lies on: at 1.5 cells from that point, away from it through the
+    position (or, where that lands among points too, by the nearest free cell around it)."""
+
+    def __init__(self, points: Array, low: Array, high: Array, cell: float | None = None) -> None:
+        from scipy import ndimage
+
+        self.low, self.high = np.asarray(low, np.float64), np.asarray(high, np.float64)
+        p = np.asarray(points, np.float64)
+        p = p[np.all((p >= self.low) & (p <= self.high), axis=1)]
+        if cell is None:
+            cell = 2.0 * _typical_spacing(p)
+        self.cell = max(float(cell), float(np.max(self.high - self.low)) / 2048, 1e-9)
+        shape = tuple(int(n) for n in np.maximum(np.ceil((self.high - self.low) / self.cell), 1).astype(int))
+        self.wall = np.zeros(shape, dtype=bool)
+        if len(p):
+            self.wall[tuple(self._index(p).T)] = True
+        labels, _ = ndimage.label(~self.wall)
+        edge = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+        self.enclosed = (labels > 0) & ~np.isin(labels, edge[edge > 0])
+        self._points = p
+
+    def _index(self, pos: Array) -> NDArray[np.int64]:
+        idx = np.floor((pos - self.low) / self.cell).astype(np.int64)
+        return np.clip(idx, 0, np.array(self.wall.shape) - 1)
+
+    @property
+    def any(self) -> bool:
+        """Does the cloud enclose any free cell?"""
+        return bool(self.enclosed.any())
+
+    def contains(self, positions: Array) -> NDArray[np.bool_]:
+        """Whether each position ``(N, 2)`` lies in an enclosed region."""
+        pos = np.asarray(positions, np.float64).reshape(-1, 2)
+        out = np.zeros(len(pos), dtype=bool)
+        inside = np.all((pos >= self.low) & (pos <= self.high), axis=1)
+        idx = self._index(pos)
+        out[inside] = self.enclosed[idx[inside, 0], idx[inside, 1]]
+        on_wall = np.flatnonzero(inside & self.wall[idx[:, 0], idx[:, 1]])
+        if len(on_wall):
+            from scipy.spatial import cKDTree
+
+            dist, near = cKDTree(self._points).query(pos[on_wall])
+            for k, d, j in zip(on_wall, dist, near):
+                probe = self._points[j] + (pos[k] - self._points[j]) / max(d, 1e-12) * 1.5 * self.cell if d > 0 else pos[k]
+                cell = self._index(probe)
+                free = bool(np.all((probe >= self.low) & (probe <= self.high))) and not self.wall[cell[0], cell[1]]
+                out[k] = bool(self.enclosed[cell[0], cell[1]]) if free else self._nearest_free(pos[k], idx[k])
+        return out
+
+    def _nearest_free(self, pos: Array, idx: NDArray[np.int64]) -> bool:
+        """The verdict of the free cell nearest ``pos`` among the 3 x 3 cells around its own
+        (enclosed when all of them hold points)."""
+        best, verdict = np.inf, True
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                i, j = int(idx[0]) + di, int(idx[1]) + dj
+                if not (0 <= i < self.wall.shape[0] and 0 <= j < self.wall.shape[1]) or self.wall[i, j]:
+                    continue
+                d = float(np.linalg.norm(self.low + (np.array([i, j]) + 0.5) * self.cell - pos))
+                if d < best:
+                    best, verdict = d, bool(self.enclosed[i, j])
+        return verdict
+
+
+def _typical_spacing(points: Array) -> float:
+    """The median nearest-neighbour distance of ``points`` (0 for fewer than 2)."""
+    from scipy.spatial import cKDTree
+
+    if len(points) < 2:
+        return 0.0
+    dist, _ = cKDTree(points).query(points, k=2)
+    return float(np.median(dist[:, 1]))
+
+
+def enclosed_regions(scene: Scene) -> EnclosedRegions | None:
+    """The regions the point clouds of a 2D ``scene`` enclose, or None (a 3D scene, or one
+    without point clouds: 3D clouds are not checked)."""
+    clouds = [s.points for s in scene.obstacles if isinstance(s, PointCloud)]
+    if scene.dim != 2 or not clouds:
+        return None
+    return EnclosedRegions(np.concatenate(clouds), scene.low, scene.high)
+
+
+class CloudScenario(FixedScenario):
+    """:class:`FixedScenario` whose drawn starts and goals also avoid the regions the
+    scene's 2D point clouds enclose (see :class:`EnclosedRegions`)."""
+
+    #: redraws of an enclosed start or goal before giving up
+    MAX_REDRAWS = 1000
+
+    def __init__(self, scene: Scene, robot: Robot, horizon: int = 50, fixed: Sequence[Problem] = ()) -> None:
+        super().__init__(scene, robot, horizon, fixed)
+        regions = enclosed_regions(scene)
+        self.enclosed = regions if regions is not None and regions.any else None
+
+    def sample_problem(self, scene: Scene, rng: np.random.Generator) -> tuple[Array, Array]:
+        q = self.robot.sample_free(scene.world, rng, 2, scene.low, scene.high)
+        if self.enclosed is None:
+            return q[0], q[1]
+        for _ in range(self.MAX_REDRAWS):
+            bad = self.enclosed.contains(self.robot.positions(q))
+            if not bad.any():
+                return q[0], q[1]
+            q[bad] = self.robot.sample_free(scene.world, rng, int(bad.sum()), scene.low, scene.high)
+        raise RuntimeError(
+            f"{scene.name}: no free place found outside the regions the point cloud encloses; give bounds inside its outer walls, or the start and goal"
+        )
 
 
 # ============================================================================ writing

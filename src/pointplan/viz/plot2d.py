@@ -16,6 +16,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
+from matplotlib.colors import to_rgb
 from matplotlib.figure import Figure
 from matplotlib.layout_engine import ConstrainedLayoutEngine
 from matplotlib.lines import Line2D
@@ -107,18 +108,29 @@ def _draw_obstacles(ax: Axes, scene: Scene) -> None:
             raise TypeError(f"cannot draw a {type(s).__name__} in 2D")
 
 
-def _robot_patches(ax: Axes, robot: Robot | None, q: Array, color: str, label: str, zorder: float = 6) -> None:
-    """The robot's body at ``q`` (true size) plus a marker so that a tiny robot stays visible."""
+def robot_label(robot: Robot) -> str:
+    """``"<name>, radius <r>"`` for a robot made of one disc or sphere, else its name."""
+    parts = robot.parts
+    if len(parts.sphere_radii) == 1 and len(parts.box_halfs) == 0:
+        return f"{robot.name}, radius {float(parts.sphere_radii[0]):g}"
+    return robot.name
+
+
+def _robot_patches(ax: Axes, robot: Robot | None, q: Array, color: str, label: str, zorder: float = 6, body_label: str = "_nolegend_") -> None:
+    """The robot's body at ``q`` at true size, outlined on top of a small marker at its
+    centre (which keeps a tiny robot visible without hiding its size)."""
     q = np.asarray(q, np.float64)
-    ax.plot(q[0], q[1], "o", ms=6, mfc=color, mec="black", mew=0.8, zorder=zorder + 1, label=label)
+    ax.plot(q[0], q[1], "o", ms=6 if robot is None else 3.5, mfc=color, mec="black", mew=0.8 if robot is None else 0.4, zorder=zorder, label=label)
     if robot is None:
         return
     sc, bc, br, bh = robot.world_parts(q[None])
     for c, r in zip(sc[0], robot.parts.sphere_radii):
-        ax.add_patch(Circle(tuple(c[:2]), float(r), fc=color, ec="black", lw=0.6, alpha=0.6, zorder=zorder))
+        ax.add_patch(Circle(tuple(c[:2]), float(r), fc=(*to_rgb(color), 0.35), ec="black", lw=0.8, zorder=zorder + 1, label=body_label))
+        body_label = "_nolegend_"
     for c, rot, h in zip(bc[0], br[0], bh[0]):
         box = Box(center=c[:2], size=2 * h[:2], rotation=rot[:2, :2])
-        ax.add_patch(Polygon(_box_corners(box), closed=True, fc=color, ec="black", lw=0.6, alpha=0.6, zorder=zorder))
+        ax.add_patch(Polygon(_box_corners(box), closed=True, fc=(*to_rgb(color), 0.35), ec="black", lw=0.8, zorder=zorder + 1, label=body_label))
+        body_label = "_nolegend_"
 
 
 def _observation_to_world(observation: Array, robot: Robot | None, start: Array) -> tuple[Array, Array | None]:
@@ -254,11 +266,13 @@ def draw_problem(
 
     # start and goal on top
     ax.add_patch(Circle(tuple(problem.goal[:2]), goal_tolerance, fill=False, ec=C_GOAL, lw=1.0, ls="--", zorder=6, label="_nolegend_"))
-    _robot_patches(ax, robot, problem.start, C_START, "start")
+    body = robot_label(robot) if robot is not None else "_nolegend_"
+    _robot_patches(ax, robot, problem.start, C_START, "start", body_label=body)
     if robot is not None and robot.config_dim == robot.dim:
         _robot_patches(ax, robot, problem.goal, C_GOAL, "_nolegend_")
+    else:
+        ax.plot(problem.goal[0], problem.goal[1], "o", ms=6, mfc=C_GOAL, mec="black", mew=0.8, zorder=7, label="_nolegend_")
     ax.plot([], [], "o", ms=6, mfc=C_GOAL, mec="black", mew=0.8, ls="--", color=C_GOAL, lw=1.0, label=f"goal (tol. {goal_tolerance:g})")
-    ax.plot(problem.goal[0], problem.goal[1], "o", ms=6, mfc=C_GOAL, mec="black", mew=0.8, zorder=7, label="_nolegend_")
 
     ax.set_xlim(low[0], high[0])
     ax.set_ylim(low[1], high[1])

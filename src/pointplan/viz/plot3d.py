@@ -44,6 +44,7 @@ from ..geometry.shapes import (
 )
 from ..robots.base import Robot
 from ..scenes.scene import Problem
+from .plot2d import robot_label
 
 Array = NDArray[np.float64]
 
@@ -374,20 +375,43 @@ def _draw_path(ax: Axes3D, robot: Robot, path: Array, ghosts: int = N_GHOSTS, up
     return out
 
 
+def _sphere_rings(ax: Axes3D, robot: Robot, q: Array) -> list[Any]:
+    """The outline of each sphere of the robot's body at ``q`` as seen from the axes' view
+    direction: a circle of the sphere's radius, so its size shows whatever covers it."""
+    elev, azim = np.radians(float(ax.elev)), np.radians(float(ax.azim))
+    w = np.array([np.cos(elev) * np.cos(azim), np.cos(elev) * np.sin(azim), np.sin(elev)])
+    u = np.cross(w, [0.0, 0.0, 1.0])
+    u = u / np.linalg.norm(u) if np.linalg.norm(u) > 1e-9 else np.array([1.0, 0.0, 0.0])
+    v = np.cross(w, u)
+    t = np.linspace(0.0, 2 * np.pi, 49)
+    ring = np.cos(t)[:, None] * u + np.sin(t)[:, None] * v
+    centres = robot.world_parts(np.asarray(q, np.float64)[None])[0][0]
+    out: list[Any] = []
+    for c, r in zip(centres, robot.parts.sphere_radii):
+        pts = c + float(r) * ring
+        out += ax.plot(pts[:, 0], pts[:, 1], pts[:, 2], "-", color="black", lw=0.8, zorder=_Z["marker"])
+    return out
+
+
 def _draw_endpoints(ax: Axes3D, robot: Robot, start: Array | None, goal: Array | None) -> list[Any]:
+    """The robot at ``start`` and ``goal`` (with its spheres outlined) and a small marker at
+    each centre (for the axes' current view)."""
     out: list[Any] = []
     for q, color in ((goal, C_GOAL), (start, C_START)):
         if q is None:
             continue
         out.append(_draw_robot(ax, robot, q, color, 0.9))
+        out += _sphere_rings(ax, robot, q)
         p = robot.positions(np.asarray(q, np.float64))
         # a marker keeps a small robot visible
-        out += ax.plot([p[0]], [p[1]], [p[2]], "o", ms=4, mfc=color, mec="black", mew=0.6, zorder=_Z["marker"])
+        out += ax.plot([p[0]], [p[1]], [p[2]], "o", ms=2.5, mfc=color, mec="black", mew=0.4, zorder=_Z["marker"])
     return out
 
 
-def _legend_handles(points: bool, path: bool, start: str = "start") -> list[Any]:
+def _legend_handles(points: bool, path: bool, start: str = "start", robot: Robot | None = None) -> list[Any]:
     h: list[Any] = [Patch(fc=C_OBSTACLE, ec=C_OBSTACLE_EDGE, alpha=0.6, label="obstacles")]
+    if robot is not None:
+        h.append(Line2D([], [], ls="none", marker="o", ms=7, mfc="none", mec="black", mew=0.8, label=robot_label(robot)))
     if points:
         h.append(Line2D([], [], ls="none", marker="o", ms=4, mfc=C_POINTS, mec="#8a4a0b", mew=0.3, label="observed points"))
     h.append(Line2D([], [], ls="none", marker="o", ms=6, mfc=C_START, mec="black", mew=0.7, label=start))
@@ -453,8 +477,8 @@ def _draw_problem(
         _draw_points(ax, points, normals, scene.low, scene.high)
     if path is not None:
         _draw_path(ax, robot, path, floor=float(scene.low[2]))
-    _draw_endpoints(ax, robot, problem.start, problem.goal)
     ax.view_init(elev=elev, azim=azim)
+    _draw_endpoints(ax, robot, problem.start, problem.goal)
     title = _title_of(problem) if title is None else title
     if title:
         ax.set_title(title, fontsize=fontsize, pad=0)
@@ -484,7 +508,13 @@ def render_problem_3d(
     ax = fig.add_axes((0.0, 0.07, 1.0, 0.88), projection="3d")
     _draw_problem(ax, problem, robot, p, points, normals, title, obstacles, elev, azim)
     fig.legend(
-        handles=_legend_handles(points is not None, p is not None), loc="lower center", ncols=5, fontsize=8, frameon=False, handlelength=1.5, columnspacing=1.2
+        handles=_legend_handles(points is not None, p is not None, robot=robot),
+        loc="lower center",
+        ncols=6,
+        fontsize=8,
+        frameon=False,
+        handlelength=1.5,
+        columnspacing=1.2,
     )
     _save(fig, output)
     return fig
@@ -526,7 +556,7 @@ def render_grid_3d(
         title = titles[i] if titles is not None else (_title_of(pr) or f"problem {i}")
         _draw_problem(ax, pr, robot, p, None, None, title, None, 25, azim, fontsize=8)
         ax.set_box_aspect(tuple(pr.scene.high - pr.scene.low), zoom=1.0)  # room for the tick labels
-    fig.legend(handles=_legend_handles(False, any_path), loc="lower center", ncols=4, fontsize=8, frameon=False)
+    fig.legend(handles=_legend_handles(False, any_path, robot=robot), loc="lower center", ncols=5, fontsize=8, frameon=False)
     _save(fig, output)
     return fig
 
