@@ -40,6 +40,7 @@ LAYERS = [
     "distributed",  # Ray: takes evaluation and learning to workers
     "viz",
     TOP,
+    "recipes",  # the commands that rebuild the shipped checkpoints (runs pointplan in subprocesses)
     "cli",
     "__main__",
 ]

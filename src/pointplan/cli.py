@@ -1433,6 +1433,9 @@ def build_parser() -> argparse.ArgumentParser:
         _add_convert_parser,
     ):
         add(sub)
+    from .recipes import add_parser as add_recipe_parser
+
+    add_recipe_parser(sub)
     return parser
 
 
