@@ -12,7 +12,7 @@ clearance below :data:`TOUCH` a contact.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -219,11 +219,17 @@ def advance(clearance: Clearance, robot: Robot, q0: Array, q1: Array) -> tuple[b
     Returns whether no configuration comes within :data:`TOUCH` of an obstacle, and the
     smallest clearance met."""
     v = robot.log(q0, q1)
-    speed = speed_bound(robot, v)
+    return advance_along(clearance, lambda s: q0 if s == 0.0 else robot.integrate(q0, v * s), speed_bound(robot, v))
+
+
+def advance_along(clearance: Clearance, pose: Callable[[float], Array], speed: float) -> tuple[bool, float]:
+    """Conservative advancement along any motion ``pose(s)``, ``s`` in ``[0, 1]``, no body
+    point of which moves faster than ``speed`` per unit of ``s``: from a configuration with
+    clearance ``d`` the next ``d / speed`` of ``s`` cannot touch. Returns whether no
+    configuration comes within :data:`TOUCH` of an obstacle, and the smallest clearance met."""
     s, low = 0.0, math.inf
     for _ in range(MAX_STEPS):
-        q = q0 if s == 0.0 else robot.integrate(q0, v * s)
-        d = clearance(q)
+        d = clearance(pose(s))
         low = min(low, d)
         if d < TOUCH:
             return False, low

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from ..robots.base import Robot
 from ..scenes.scene import Problem
-from .clearance import MAX_STEPS, TOUCH, Clearance
+from .clearance import Clearance, advance_along
 
 Array = NDArray[np.float64]
 
@@ -77,16 +77,7 @@ def linear_slerp_free(clearance: Clearance, robot: Robot, q0: Array, q1: Array) 
     a, b = q0[3:] / np.linalg.norm(q0[3:]), q1[3:] / np.linalg.norm(q1[3:])
     theta = 2.0 * math.acos(min(1.0, abs(float(np.dot(a, b)))))
     speed = float(np.linalg.norm(q1[:3] - q0[:3])) + theta * body_radius(robot)
-    s, low = 0.0, math.inf
-    for _ in range(MAX_STEPS):
-        d = clearance(slerp_pose(q0, q1, s))
-        low = min(low, d)
-        if d < TOUCH:
-            return False, low
-        if s >= 1.0 or speed <= 0.0:
-            return True, low
-        s = min(1.0, s + d / speed)
-    return False, low
+    return advance_along(clearance, lambda s: slerp_pose(q0, q1, s), speed)
 
 
 def check_linear_slerp(robot: Robot, problem: Problem, path: Array) -> tuple[bool, int]:
