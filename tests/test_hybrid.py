@@ -52,3 +52,21 @@ def test_hybrid_from_the_cli(capsys: pytest.CaptureFixture[str]) -> None:
 
     assert cli.main(["eval", "--planner", "hybrid", "--episodes", "3", "--quiet"]) == 0
     assert "hybrid" in capsys.readouterr().out
+
+
+def test_hybrid_with_ompl_fallback_and_a_time_budget() -> None:
+    """``hybrid-ompl``: the policy, then OMPL's RRTConnect with pointplan's certified edges;
+    a policy that cannot move hands every problem to the fallback, whose paths the
+    evaluator accepts; the query's budget reaches the fallback."""
+    pytest.importorskip("ompl")
+    sc = Narrow2DScenario()
+    planner = make_planner("hybrid-ompl", sc.robot, time_limit=3.0)
+    assert planner.name == "hybrid-ompl" and planner.fallback.name == "ompl:RRTConnect"
+    planner.policy.engine.horizon = 1  # (one step: the fallback does the rest)
+    solved = 0
+    for p in sc.problems("test", 4, seed=0):
+        res = planner.plan(p)
+        solved += bool(res.success and check_path(sc.robot, p, res.path))
+        assert res.info.get("fallback") in (None, "ompl:RRTConnect")
+        assert planner.fallback.time_limit <= 3.0
+    assert solved == 4

@@ -128,7 +128,7 @@ def _warn_enclosed(scenario: Any) -> None:
 
 
 #: planners that take --checkpoint
-POLICY_PLANNERS = ("policy", "hybrid")
+POLICY_PLANNERS = ("policy", "hybrid", "hybrid-ompl")
 #: MPNet planners (their own checkpoints: `pointplan mpnet-train`)
 MPNET_PLANNERS = ("mpnet-nr", "mpnet-hr")
 #: learned-sampling planners: Bi-RRT with a CVAE's samples (their own checkpoints: `pointplan lsample-train`)
@@ -152,7 +152,7 @@ def _check_checkpoint(args: argparse.Namespace, names: Sequence[str]) -> None:
     kinds = [
         kind
         for kind, members in (
-            ("policy planners (policy, hybrid)", POLICY_PLANNERS),
+            ("policy planners (policy, hybrid, hybrid-ompl)", POLICY_PLANNERS),
             ("MPNet planners (mpnet-nr, mpnet-hr)", MPNET_PLANNERS),
             ("learned-sampling planners (lsample-0.5, lsample-0.9, learned-sampling)", LSAMPLE_PLANNERS),
         )
@@ -201,7 +201,7 @@ def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
         kwargs = {"max_nodes": args.max_nodes, "seed": seed}
     elif name.lower() in LSAMPLE_PLANNERS:
         kwargs = {"max_nodes": args.max_nodes, "seed": seed, "checkpoint": getattr(args, "checkpoint", None)}
-    elif name in ("policy", "hybrid"):
+    elif name in POLICY_PLANNERS:
         kwargs = {"checkpoint": getattr(args, "checkpoint", None), "observation": getattr(args, "observation", None), "scene": getattr(args, "env", None)}
         if getattr(args, "no_greedy_goal", False):
             if name == "policy":

@@ -86,7 +86,9 @@ def _hybrid_ompl_factory(robot: Robot, **kw: Any) -> Planner:
     """The hybrid with OMPL's RRTConnect (pointplan's certified motion checks) as its
     fallback, 10 s a query unless ``time_limit`` says otherwise (``pip install 'pointplan[ompl]'``)."""
     kw.setdefault("time_limit", 10.0)
-    return _hybrid_factory(robot, fallback="ompl:RRTConnect", **kw)
+    planner = _hybrid_factory(robot, fallback="ompl:RRTConnect", **kw)
+    planner.name = "hybrid-ompl"  # type: ignore[misc]
+    return planner
 
 
 PLANNERS["hybrid"] = _hybrid_factory
