@@ -46,7 +46,7 @@ from ..observers import make_observer
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Scene
-from .rundir import CtrlC, RunDir, atomic_write, load_trainer_state
+from .rundir import CtrlC, RunDir, atomic_write, load_trainer_state, optimizer_and_random_state, restore_optimizer_and_random_state
 
 Array = NDArray[np.float64]
 
@@ -445,9 +445,7 @@ class _Fit:
         """``last.pt``: the classifier (as :func:`save_classifier` keeps it) and the trainer state."""
         trainer = {
             "epoch": self.epoch,
-            "optimizer": self.opt.state_dict(),
-            "rng": self.rng.bit_generator.state,
-            "torch_rng": torch.get_rng_state(),
+            **optimizer_and_random_state(self.opt, self.rng),
             "history": [dict(r) for r in self.history],
             "best_acc": self.best_acc,
             "best_epoch": self.best_epoch,
@@ -461,9 +459,7 @@ class _Fit:
         state = load_trainer_state(path, "collision_trainer", "pointplan collision-classify")
         self.model.load_state_dict(state["model"])
         t = state["collision_trainer"]
-        self.opt.load_state_dict(t["optimizer"])
-        self.rng.bit_generator.state = t["rng"]
-        torch.set_rng_state(t["torch_rng"])
+        restore_optimizer_and_random_state(t, self.opt, self.rng)
         self.epoch, self.best_acc, self.best_epoch = int(t["epoch"]), float(t["best_acc"]), int(t["best_epoch"])
         self.history, self.best_state, self.train_before = [dict(r) for r in t["history"]], t["best_model"], float(t["train_time_s"])
 

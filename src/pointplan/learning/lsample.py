@@ -30,7 +30,7 @@ from ..models.cvae import POINT_SPACING, CVAEConfig, LearnedSamplerNet, normalis
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from .bc import Demos, generate_demos, load_demos, save_demos
-from .rundir import RunDir, load_trainer_state, say_interrupted_early
+from .rundir import RunDir, epoch_range, load_trainer_state, optimizer_and_random_state, restore_optimizer_and_random_state, say_interrupted_early
 
 
 @dataclass(frozen=True)
@@ -256,9 +256,7 @@ class _LSampleRun:
         state = load_trainer_state(path, "lsample_trainer", "pointplan lsample-train")
         self.net.load_state_dict(state["weights"])
         t = state["lsample_trainer"]
-        self.opt.load_state_dict(t["optimizer"])
-        self.rng.bit_generator.state = t["rng"]
-        torch.set_rng_state(t["torch_rng"])
+        restore_optimizer_and_random_state(t, self.opt, self.rng)
         self.epoch, self.train_before = int(t["epoch"]), float(t["train_time_s"])
         self.best = (float(t["best"][0]), int(t["best"][1])) if t["best"] is not None else None
         self.rows = [dict(r) for r in t["rows"]]
@@ -275,9 +273,7 @@ class _LSampleRun:
         """``last.pt``: the sampler (a sampler checkpoint) with the trainer state to resume from."""
         state = {
             "epoch": self.epoch,
-            "optimizer": self.opt.state_dict(),
-            "rng": self.rng.bit_generator.state,
-            "torch_rng": torch.get_rng_state(),
+            **optimizer_and_random_state(self.opt, self.rng),
             "best": list(self.best) if self.best is not None else None,
             "rows": [_plain(r) for r in self.rows],
             "train_time_s": self.train_time,
@@ -331,13 +327,7 @@ def train_lsample(cfg: LSampleConfig, run_dir: str | Path, progress: bool = True
     except KeyboardInterrupt:
         say_interrupted_early("planning the demonstrations")
         return {"run_dir": str(folder.path), "epochs": 0, "interrupted": True}
-    if run.epoch >= cfg.epochs:
-        raise ValueError(f"{resume}: the run has done its {run.epoch} epochs; give --epochs above that to continue it")
-    epochs: Any = range(run.epoch + 1, cfg.epochs + 1)
-    if progress:
-        from tqdm import tqdm
-
-        epochs = tqdm(epochs, desc="lsample-train", unit="epoch", total=cfg.epochs, initial=run.epoch)
+    epochs = epoch_range(run.epoch, cfg.epochs, resume, "lsample-train", progress)
     with folder.ctrl_c() as stop:
         for ep in epochs:
             row = run.train_epoch(ep, stop)

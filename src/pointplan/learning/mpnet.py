@@ -52,7 +52,7 @@ from ..planners.mpnet import MPNetPlanner, scene_points
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from .bc import Demos, generate_demos, load_demos, save_demos
-from .rundir import RunDir, load_trainer_state, say_interrupted_early
+from .rundir import RunDir, epoch_range, load_trainer_state, optimizer_and_random_state, restore_optimizer_and_random_state, say_interrupted_early
 
 
 @dataclass(frozen=True)
@@ -297,10 +297,8 @@ class _MPNetRun:
         state = load_trainer_state(path, "mpnet_trainer", "pointplan mpnet-train")
         self.model.load_state_dict(state["model"])
         t = state["mpnet_trainer"]
-        self.opt.load_state_dict(t["optimizer"])
+        restore_optimizer_and_random_state(t, self.opt, self.rng)
         self.sched.load_state_dict(t["scheduler"])
-        self.rng.bit_generator.state = t["rng"]
-        torch.set_rng_state(t["torch_rng"])
         self.epoch, self.best_epoch, self.train_before = int(t["epoch"]), int(t["best_epoch"]), float(t["train_time_s"])
         self.best = (float(t["best"][0]), float(t["best"][1])) if t["best"] is not None else None
         self.best_val, self.history = dict(t["best_val"]), [dict(r) for r in t["history"]]
@@ -356,10 +354,8 @@ class _MPNetRun:
         """``last.pt``: the network (an MPNet checkpoint) with the trainer state to resume from."""
         state = {
             "epoch": self.epoch,
-            "optimizer": self.opt.state_dict(),
+            **optimizer_and_random_state(self.opt, self.rng),
             "scheduler": self.sched.state_dict(),
-            "rng": self.rng.bit_generator.state,
-            "torch_rng": torch.get_rng_state(),
             "best": list(self.best) if self.best is not None else None,
             "best_epoch": self.best_epoch,
             "best_val": _plain(self.best_val),
@@ -391,13 +387,7 @@ def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = Tru
     except KeyboardInterrupt:
         say_interrupted_early("planning the demonstrations")
         return MPNetTrainResult(folder.path, 0, {}, [], {}, 0.0, 0.0, interrupted=True)
-    if run.epoch >= cfg.epochs:
-        raise ValueError(f"{resume}: the run has done its {run.epoch} epochs; give --epochs above that to continue it")
-    epochs: Any = range(run.epoch + 1, cfg.epochs + 1)
-    if progress:
-        from tqdm import tqdm
-
-        epochs = tqdm(epochs, desc="mpnet", unit="epoch", total=cfg.epochs, initial=run.epoch)
+    epochs = epoch_range(run.epoch, cfg.epochs, resume, "mpnet", progress)
     with folder.ctrl_c() as stop:
         for ep in epochs:
             row = run.train_epoch(ep, stop)

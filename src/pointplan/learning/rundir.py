@@ -248,6 +248,31 @@ class RunDir:
         self.metrics.close()
 
 
+def optimizer_and_random_state(opt: torch.optim.Optimizer, rng: Any) -> dict[str, Any]:
+    """The optimiser's state and both random generators' (numpy ``rng`` and PyTorch's), for a trainer state."""
+    return {"optimizer": opt.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}
+
+
+def restore_optimizer_and_random_state(t: Mapping[str, Any], opt: torch.optim.Optimizer, rng: Any) -> None:
+    """Put back what :func:`optimizer_and_random_state` saved."""
+    opt.load_state_dict(t["optimizer"])
+    rng.bit_generator.state = t["rng"]
+    torch.set_rng_state(t["torch_rng"])
+
+
+def epoch_range(done: int, total: int, resume: object, desc: str, progress: bool) -> Any:
+    """The epochs ``done + 1 .. total`` still to run (with a progress bar when ``progress``);
+    a ValueError naming ``resume`` when none is left."""
+    if done >= total:
+        raise ValueError(f"{resume}: the run has done its {done} epochs; give --epochs above that to continue it")
+    epochs: Any = range(done + 1, total + 1)
+    if progress:
+        from tqdm import tqdm
+
+        epochs = tqdm(epochs, desc=desc, unit="epoch", total=total, initial=done)
+    return epochs
+
+
 def say_interrupted_early(what: str) -> None:
     """The line for Ctrl-C before training started (nothing to save)."""
     print(f"interrupted while {what}: nothing trained yet, nothing saved", file=sys.stderr, flush=True)

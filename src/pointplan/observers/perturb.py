@@ -1,4 +1,4 @@
-"""Perturbed point observations (issue 14: how robust is a policy to what it sees?).
+"""Perturbed point observations: how robust is a policy to what it sees?
 
 :class:`PerturbedPoints` wraps a point-set observer (``surface``, ``surface-normals``,
 ``interior``) and changes what it hands the policy:

@@ -424,8 +424,7 @@ class _Lockstep(_Stepper):
             return np.asarray(self.act(obs, core.q.copy(), core.goal.copy()), np.float32)
         scale = np.where(escaping, self.esc.noise, self.noise)
         draw = self.nrng.standard_normal((len(self.problems), len(self.robot.action_scale)))
-        goal_in = target.copy() if target is not st.goal else core.goal.copy()
-        return np.asarray(self.act(obs, core.q.copy(), goal_in, noise=scale[:, None] * draw), np.float32)
+        return np.asarray(self.act(obs, core.q.copy(), target.copy(), noise=scale[:, None] * draw), np.float32)
 
     def move(self, a: np.ndarray, st: _State) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         _, term, _, info = self.core.step(a)

@@ -1,4 +1,4 @@
-"""2D-Narrow variants drawn differently from the training generator (issue 14: robustness).
+"""2D-Narrow variants drawn differently from the training generator, to measure how robust a policy is.
 
 The walls are those of 2D-Narrow (a horizontal and a vertical 0.1-thick wall crossing the
 unit square, their positions uniform in [0.3, 0.8]); what changes is the gaps:
