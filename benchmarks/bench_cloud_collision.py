@@ -6,8 +6,8 @@ bodies) this times:
 
 - ``check``: one ``robot.collides`` call on a batch of configurations, through the k-d
   tree (:func:`pointplan.geometry.collision.boxes_contain_cloud_points`) against the
-  brute-force test of every cloud point against every body box (the reference: the same
-  answers are asserted);
+  brute-force test of every cloud point (a sphere of the cloud's point radius) against
+  every body box (the reference: the same answers are asserted);
 - ``plan``: ``PolicyPlanner.plan`` (the shipped S-shape policy, ``global`` observation)
   on a few problems in the cloud scene, with the k-d tree, for the whole query time;
 - ``--success``: the shipped S-shape policies (``local`` and ``global``) on each problem
@@ -61,7 +61,8 @@ def main() -> None:
     _, c, rot, h = robot.world_parts(q)  # the body boxes (the S-shape has no sphere parts)
     assert not len(robot.parts.sphere_radii)
     t = time.perf_counter()  # reference: every point against every body box, by brute force
-    ref = np.any(sphere_box_sqdist(pts, c.reshape(-1, 3), rot.reshape(-1, 3, 3), h.reshape(-1, 3)) <= 0.0, 0)
+    r = cloud.obstacles[0].point_radius()  # each point is a sphere of the cloud's point radius
+    ref = np.any(sphere_box_sqdist(pts, c.reshape(-1, 3), rot.reshape(-1, 3, 3), h.reshape(-1, 3)) <= r * r, 0)
     t_brute = time.perf_counter() - t
     ref = ref.reshape(c.shape[:-1]).any(-1)
     assert np.array_equal(ref, fast), "the k-d tree and the brute force disagree"
