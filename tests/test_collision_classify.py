@@ -98,6 +98,39 @@ def test_samples_are_balanced_free_starts_with_half_near_the_boundary(scenario) 
     assert sw.labels("swept").mean() == 0.5
 
 
+def test_uniform_samples_keep_the_natural_collision_share(scenario) -> None:  # type: ignore[no-untyped-def]
+    """``sampling="uniform"`` keeps samples as drawn: its collision share matches an
+    independent Monte Carlo estimate over the same workspaces (free starts, uniform
+    actions, labels from the package's collision kernel), far from the strata's 0.5."""
+    s = draw_samples(scenario, "train", 20, 200, np.random.default_rng(4), sampling="uniform")
+    assert len(s) == 4000
+    rng = np.random.default_rng(5)
+    hits, n = 0, 0
+    for scene in s.scenes:
+        q = rng.uniform(scene.low, scene.high, (4000, 2))
+        q = q[~scenario.robot.collides(scene.world, q)][:400]
+        e = end_configuration(scenario.robot, q, rng.uniform(-1, 1, q.shape), scene.low, scene.high)
+        hits += int(scenario.robot.collides(scene.world, e).sum())
+        n += len(q)
+    share, expect = s.labels("end").mean(), hits / n
+    assert abs(share - expect) < 4 * np.sqrt(expect * (1 - expect) / 4000) + 0.005, (share, expect)
+    assert share < 0.35 and s.near("end", 0.02).mean() < 0.4
+    with pytest.raises(ValueError, match="sampling"):
+        CollisionConfig(sampling="grid")
+
+
+def test_patience_stops_and_the_test_reports_both_samplings(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """With patience 1 and a step size too large to learn, training stops two epochs after
+    its best; the test carries the stratified accuracy and ``accuracy_uniform``."""
+    torch.set_num_threads(1)
+    cfg = CollisionConfig(n_points=16, train_scenes=4, val_scenes=2, test_scenes=2, per_scene=16, epochs=30, patience=1, width=8, lr=5.0, lr_end=1.0)
+    res = train_classifier(cfg, tmp_path, progress=False)
+    assert not res.interrupted
+    assert len(res.history) == res.best_epoch + 1 < 30
+    assert res.test["n"] == 32 and res.test["uniform"]["n"] == 32
+    assert 0.0 <= res.test["accuracy_uniform"] <= 1.0
+
+
 def test_splits_use_disjoint_workspaces() -> None:
     data = make_data(CollisionConfig(train_scenes=3, val_scenes=2, test_scenes=2, per_scene=8))
     walls = {k: {tuple(np.round(np.concatenate([o.center for o in sc.obstacles]), 9)) for sc in v.scenes} for k, v in data.items()}

@@ -16,8 +16,12 @@ uniformly in ``[-1, 1]^2``; the candidates are then sorted by the end's signed c
 ``c`` (distance to the nearest obstacle minus the radius; ``c <= 0`` is a collision) into
 four strata of equal quota: colliding and near (``-band < c <= 0``), colliding and deep
 (``c <= -band``), free and near (``0 < c < band``), free and far (``c >= band``). So the
-classes are balanced and half of the samples lie within ``band`` of the boundary.
-Train, validation and test samples come from the scenario's disjoint workspace splits.
+classes are balanced and half of the samples lie within ``band`` of the boundary. With
+``sampling="uniform"`` (the paper's protocol) the candidates are kept as drawn: starts uniform
+among free configurations, actions uniform, the classes as they fall. Train, validation and
+test samples come from the scenario's disjoint workspace splits; the test is run on both
+kinds of samples (``accuracy`` on the strata, ``accuracy_uniform`` on uniform samples of the
+same test workspaces), whichever kind the classifier was trained on.
 
 Classifier. An obstacle encoder (PointNet for point sets, the CNN for the occupancy image;
 :mod:`pointplan.models.encoders`) of the robot-centred observation at ``q``, then an MLP on
@@ -52,6 +56,8 @@ Array = NDArray[np.float64]
 
 #: the two labels: the end configuration, or the whole straight move
 LABELS = ("end", "swept")
+#: how samples are drawn: four clearance strata of equal quota, or uniformly (the paper's)
+SAMPLINGS = ("strata", "uniform")
 #: observations of the 2D disc the classifier can read
 OBSERVATIONS = ("image", "interior", "surface", "surface-normals")
 
@@ -189,10 +195,14 @@ def draw_samples(
     band: float = 0.02,
     label: str = "end",
     progress: bool = False,
+    sampling: str = "strata",
 ) -> CollisionSamples:
     """``per_scene`` samples (a multiple of 4) in each of workspaces ``0..n_scenes-1`` of
     ``split``: a quarter in each stratum of the ``label``'s clearance (colliding near,
-    colliding deep, free near, free far; see the module's description)."""
+    colliding deep, free near, free far; see the module's description), or with
+    ``sampling="uniform"`` the first ``per_scene`` free starts with uniform actions."""
+    if sampling not in SAMPLINGS:
+        raise ValueError(f"sampling must be one of {', '.join(SAMPLINGS)}, not {sampling!r}")
     if label not in LABELS:
         raise ValueError(f"label must be one of {', '.join(LABELS)}, not {label!r}")
     if per_scene < 4 or per_scene % 4:
@@ -201,7 +211,8 @@ def draw_samples(
     if robot.dim != 2 or robot.config_dim != 2:
         raise ValueError("collision classification is implemented for the 2D disc")
     radius = float(robot.parts.sphere_radii.max())
-    quota = per_scene // 4
+    # samples wanted per stratum; uniform sampling puts every candidate in the first
+    quota = np.array([per_scene, 0, 0, 0]) if sampling == "uniform" else np.full(4, per_scene // 4)
     scenes, idx, qs, acts, ends, ce, cs = [], [], [], [], [], [], []
     it: Any = range(n_scenes)
     if progress:
@@ -226,15 +237,17 @@ def draw_samples(
             c_sw = segment_clearance(scene, q, e, radius)
             c = label_clearance(label, c_end, c_sw)
             strata = np.where(c <= 0.0, np.where(c > -band, 0, 1), np.where(c < band, 2, 3))
+            if sampling == "uniform":
+                strata = np.zeros(len(c), dtype=np.int64)
             for k in range(4):
-                pick = np.flatnonzero(strata == k)[: max(quota - have[k], 0)]
+                pick = np.flatnonzero(strata == k)[: max(quota[k] - have[k], 0)]
                 taken[k].append(pick + offset)
                 have[k] += len(pick)
             for key, v in zip(("q", "a", "e", "ce", "cs"), (q, a, e, c_end, c_sw)):
                 pool[key].append(v)
             offset += len(q)
         else:
-            raise RuntimeError(f"workspace {split}/{i}: could not fill the strata ({have.tolist()} of {quota} each)")
+            raise RuntimeError(f"workspace {split}/{i}: could not fill the strata ({have.tolist()} of {quota.tolist()})")
         sel = np.concatenate([np.concatenate(t) for t in taken])
         cat = {k: np.concatenate(v)[sel] for k, v in pool.items()}
         scenes.append(scene)
@@ -306,10 +319,16 @@ class CollisionConfig:
     per_scene: int = field(default=64, metadata={"min": 4})
     #: width of the near-boundary strata: end clearance within this of the boundary
     band: float = 0.02
-    #: passes over the training samples
+    #: training and validation samples: ``strata`` (half near a wall) or ``uniform`` (the paper's)
+    sampling: str = "strata"
+    #: passes over the training samples (at most, with ``patience``)
     epochs: int = field(default=12, metadata={"min": 1})
+    #: stop once validation accuracy has not improved for this many epochs (0: run every epoch)
+    patience: int = field(default=0, metadata={"min": 0})
     #: Adam step size
     lr: float = 1e-3
+    #: step size reached at the last epoch by a cosine schedule (0 or ``lr``: constant)
+    lr_end: float = 0.0
     #: samples per gradient step
     batch_size: int = field(default=256, metadata={"min": 1})
     #: encoder: ``pointnet``, ``mlp`` or ``cnn``; empty picks cnn for the image, pointnet otherwise
@@ -326,6 +345,8 @@ class CollisionConfig:
             raise ValueError(f"observation must be one of {', '.join(OBSERVATIONS)}, not {self.observation!r}")
         if self.per_scene % 4:
             raise ValueError(f"per_scene must be a multiple of 4, got {self.per_scene}")
+        if self.sampling not in SAMPLINGS:
+            raise ValueError(f"sampling must be one of {', '.join(SAMPLINGS)}, not {self.sampling!r}")
 
     @property
     def encoder_kind(self) -> str:
@@ -342,14 +363,26 @@ class SplitData:
     label: torch.Tensor
 
 
+#: the sample sets of a run: name -> (workspace split, sampling; None: the run's own)
+SAMPLE_SETS: dict[str, tuple[str, str | None]] = {
+    "train": ("train", None),
+    "val": ("val", None),
+    "test": ("test", "strata"),
+    "test_uniform": ("test", "uniform"),
+}
+
+
 def make_data(cfg: CollisionConfig, progress: bool = False) -> dict[str, CollisionSamples]:
-    """The train, val and test samples of ``cfg`` (independent of the observation: every
-    representation gets the same samples for one seed)."""
+    """The sample sets of ``cfg`` (:data:`SAMPLE_SETS`; independent of the observation:
+    every representation gets the same samples for one seed). Train and val follow
+    ``cfg.sampling``; the test workspaces give both a stratified and a uniform set."""
     scenario = make_scenario(cfg.env)
+    sizes = {"train": cfg.train_scenes, "val": cfg.val_scenes, "test": cfg.test_scenes}
     out = {}
-    for k, (split, n) in enumerate((("train", cfg.train_scenes), ("val", cfg.val_scenes), ("test", cfg.test_scenes))):
+    for k, (name, (split, sampling)) in enumerate(SAMPLE_SETS.items()):
         rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, k, 0xC011]))
-        out[split] = draw_samples(scenario, split, n, cfg.per_scene, rng, cfg.band, cfg.label, progress)
+        how = sampling or cfg.sampling
+        out[name] = draw_samples(scenario, split, sizes[split], cfg.per_scene, rng, cfg.band, cfg.label, progress and name != "test_uniform", how)
     return out
 
 
@@ -464,6 +497,16 @@ class _Fit:
         self.history, self.best_state, self.train_before = [dict(r) for r in t["history"]], t["best_model"], float(t["train_time_s"])
 
 
+def _set_lr(opt: torch.optim.Optimizer, cfg: CollisionConfig, epoch: int) -> None:
+    """The step size of ``epoch`` (1-based): ``lr`` at the first, then a cosine down to
+    ``lr_end`` at the last (constant when ``lr_end`` is 0)."""
+    end = cfg.lr_end or cfg.lr
+    frac = (epoch - 1) / max(cfg.epochs - 1, 1)
+    lr = end + 0.5 * (cfg.lr - end) * (1.0 + np.cos(np.pi * frac))
+    for g in opt.param_groups:
+        g["lr"] = lr
+
+
 def _train_epoch(fit: _Fit, tr: SplitData, cfg: CollisionConfig, bar: Any, stop: Callable[[], bool]) -> float | None:
     """One pass over the training samples: the mean loss, or None when ``stop`` ended it early."""
     model, device = fit.model, next(fit.model.parameters()).device
@@ -508,7 +551,7 @@ def train_classifier(
     t0 = time.perf_counter()
     if samples is None:
         samples = make_data(cfg, progress)
-    data = {split: _tensors(cfg, samples[split], robot, k) for k, split in enumerate(("train", "val", "test"))}
+    data = {name: _tensors(cfg, samples[name], robot, k) for k, name in enumerate(SAMPLE_SETS)}
     t_data = time.perf_counter() - t0
     obs_shape = tuple(data["train"].obs.shape[1:])
     model = CollisionClassifier(obs_shape, EncoderConfig(kind=cfg.encoder_kind, width=cfg.width, layers=3), robot.twist_dim, cfg.width, 3).to(
@@ -529,6 +572,9 @@ def train_classifier(
     train_time = lambda: fit.train_before + time.perf_counter() - t1
     with CtrlC() as stop:
         for ep in range(fit.epoch + 1, cfg.epochs + 1):
+            if cfg.patience and ep - fit.best_epoch > cfg.patience and fit.best_epoch:
+                break  # validation has stopped improving
+            _set_lr(fit.opt, cfg, ep)
             loss = _train_epoch(fit, data["train"], cfg, bar, stop)
             if loss is None:
                 break
@@ -547,7 +593,8 @@ def train_classifier(
                 break
     if bar is not None:
         bar.close()
-    res = CollisionResult(model, fit.history, fit.best_epoch, {}, {}, 0.0, t_data, fit.epoch < cfg.epochs)
+    stopped_early = bool(cfg.patience) and fit.epoch - fit.best_epoch >= cfg.patience and fit.best_epoch > 0
+    res = CollisionResult(model, fit.history, fit.best_epoch, {}, {}, 0.0, t_data, fit.epoch < cfg.epochs and not stopped_early)
     res.extra["obs_shape"] = list(obs_shape)
     if res.interrupted:
         res.train_time_s = train_time()
@@ -572,6 +619,9 @@ def _test_classifier(
     res.test_pred = predict(model, data["test"])
     res.test_samples = samples["test"]
     res.test = accuracy_report(res.test_pred, data["test"].samples, cfg.label, cfg.band)
+    uniform = accuracy_report(predict(model, data["test_uniform"]), data["test_uniform"].samples, cfg.label, cfg.band)
+    res.test["accuracy_uniform"] = uniform["accuracy"]
+    res.test["uniform"] = uniform
     if cfg.label == "end":  # the same predictions against the swept-move label
         res.extra["test_vs_swept_label"] = accuracy_report(res.test_pred, samples["test"], "swept", cfg.band)
         res.extra["test_labels_differ"] = float(np.mean(samples["test"].labels("end") != samples["test"].labels("swept")))
