@@ -101,7 +101,9 @@ def success(n_points: int, n_problems: int, seed: int) -> None:
             res = planner.plan(cloud)
             claimed += res.success
             free += bool(res.success and check_path(sc.robot, p, res.path))
-        print(f"S-shape {obs}: boxes {boxes}/{n_problems}; clouds of {n_points} points: {claimed} claimed, {free} free of the true boxes")
+        print(
+            f"S-shape {obs}: boxes {boxes}/{n_problems}; clouds of {n_points} points: {claimed} claimed, {free} free of the true boxes"
+        )
 
 
 if __name__ == "__main__":

@@ -140,7 +140,7 @@ def main() -> None:
         obstacles = coal_obstacles(boxes)
         for m in sizes:
             q = robot.sample_uniform(rng, m, scene.low, scene.high)
-            fast, fast_hit = rate(lambda: robot.collides(world, q), m, min_time)
+            fast, fast_hit = rate(lambda robot=robot, world=world, q=q: robot.collides(world, q), m, min_time)
             t0 = time.perf_counter()
             coal_hit = coal_loop(robot, obstacles, q)
             slow = m / (time.perf_counter() - t0)

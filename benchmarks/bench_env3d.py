@@ -18,6 +18,7 @@ import time
 import numpy as np
 
 from pointplan.envs import PlanningVectorEnv
+from pointplan.envs.core import BatchedCore
 from pointplan.scenes.scenes3d import SCENARIOS_3D
 
 
@@ -48,12 +49,15 @@ def main() -> None:
                     env.reset(seed=0)
                     rng = np.random.default_rng(0)
 
-                    def step() -> None:
+                    def step(env: PlanningVectorEnv = env, rng: np.random.Generator = rng, e: int = e) -> None:
                         env.step(rng.uniform(-1, 1, (e, env.robot.twist_dim)).astype(np.float32))
 
                     steps = rate(step, args.seconds) * e
-                    core = env.core
-                    obs = rate(lambda: core.observer.observe(core.q, rng, core.t), args.seconds / 2) * e
+
+                    def observe(core: BatchedCore = env.core, rng: np.random.Generator = rng) -> None:
+                        core.observer.observe(core.q, rng, core.t)
+
+                    obs = rate(observe, args.seconds / 2) * e
                     print(f"{scene:12s} {robot:9s} {observation:11s} {e:3d} {steps:12,.0f} {obs:10,.0f}", flush=True)
 
 

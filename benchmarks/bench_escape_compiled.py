@@ -27,13 +27,21 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--problems", type=int, default=400)
     ap.add_argument("--scene", default="boxes3d", help="a 3D scenario (default: %(default)s)")
-    ap.add_argument("--observation", default="global", choices=["global"], help="the point-set observer (the ray-cast one is not compiled)")
+    ap.add_argument(
+        "--observation",
+        default="global",
+        choices=["global"],
+        help="the point-set observer (the ray-cast one is not compiled)",
+    )
     ap.add_argument("--split", default="val")
     args = ap.parse_args()
     sc = make_scenario(args.scene, robot="sphere3d")
     ckpt = shipped_checkpoint("sphere3d", args.observation)
     warm = PolicyPlanner(ckpt, robot=sc.robot, escape=0, compiled=False)
-    planners = {"compiled": PolicyPlanner(ckpt, robot=sc.robot), "numpy": PolicyPlanner(ckpt, robot=sc.robot, compiled=False)}
+    planners = {
+        "compiled": PolicyPlanner(ckpt, robot=sc.robot),
+        "numpy": PolicyPlanner(ckpt, robot=sc.robot, compiled=False),
+    }
     probs = sc.problems(args.split, args.problems, seed=0)
     for pl in planners.values():  # numba's first call and the planners' set-up
         pl.plan(sc.problems("train", 1, seed=0)[0])
@@ -51,7 +59,9 @@ def main() -> None:
         a.success == b.success and a.path.shape == b.path.shape and np.allclose(a.path, b.path, atol=1e-5)
         for a, b in zip(results["compiled"], results["numpy"], strict=True)
     )
-    print(f"{args.scene}, sphere3d {args.observation}, {len(probs)} {args.split} problems; escape {planners['compiled'].escape}")
+    print(
+        f"{args.scene}, sphere3d {args.observation}, {len(probs)} {args.split} problems; escape {planners['compiled'].escape}"
+    )
     for name in names:
         ts = np.array(times[name]) * 1e3
         res = results[name]

@@ -41,7 +41,10 @@ def main() -> None:
             nodes[name] = (res.success, res.nodes)
         collision.mesh_contains = compiled  # type: ignore[assignment]
         assert nodes["compiled"] == nodes["numpy"], f"problem {i}: the two tests built different trees"
-        print(f"problem {i}: {nodes['compiled']}, compiled {times['compiled']:.1f} s, numpy {times['numpy']:.1f} s (cumulative)", flush=True)
+        print(
+            f"problem {i}: {nodes['compiled']}, compiled {times['compiled']:.1f} s, numpy {times['numpy']:.1f} s (cumulative)",
+            flush=True,
+        )
     print(
         f"Bi-RRT, {args.robot} in 3D-YCB, {args.problems} problems: compiled {times['compiled']:.1f} s, numpy {times['numpy']:.1f} s of process time; speed-up {times['numpy'] / times['compiled']:.2f}x"
     )

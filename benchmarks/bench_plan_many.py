@@ -55,7 +55,9 @@ def main() -> None:
             res = runs[name](block)
             wall[name] += time.perf_counter() - t
             ok[name] += sum(bool(r.success and check_path(robot, p, r.path)) for p, r in zip(block, res))
-    print(f"{args.env}, {robot.name}, {len(problems)} test problems (seed {args.seed}) in blocks of {args.block}, one thread")
+    print(
+        f"{args.env}, {robot.name}, {len(problems)} test problems (seed {args.seed}) in blocks of {args.block}, one thread"
+    )
     print(f"{'planner':26s} {'solved':>9s} {'queries/s':>10s}")
     for name in names:
         print(f"{name:26s} {ok[name]:>4d}/{len(problems):<4d} {len(problems) / wall[name]:>10.1f}")

@@ -23,7 +23,9 @@ import numpy as np
 DEFAULT = "policy,hybrid,hybrid-ompl,ompl:RRTConnect,birrt"
 
 
-def run_robot(robot_name: str, observation: str, planners: list[str], n: int, seed: int, env: str) -> dict[str, dict[str, Any]]:
+def run_robot(
+    robot_name: str, observation: str, planners: list[str], n: int, seed: int, env: str
+) -> dict[str, dict[str, Any]]:
     import torch
 
     from pointplan.evaluation import check_path
@@ -74,7 +76,9 @@ def main() -> None:
     for robot in [r.strip() for r in args.robots.split(",") if r.strip()]:
         res = run_robot(robot, observations[robot], planners, args.problems, args.seed, args.env)
         ref = float(np.median(res["ompl:RRTConnect"]["times"])) if "ompl:RRTConnect" in res else None
-        print(f"\n{args.env}, {robot} ({observations[robot]} policy), {args.problems} test problems (seed {args.seed}), one thread, planners taking turns")
+        print(
+            f"\n{args.env}, {robot} ({observations[robot]} policy), {args.problems} test problems (seed {args.seed}), one thread, planners taking turns"
+        )
         print(f"{'planner':24s} {'solved':>8s} {'median ms':>10s} {'mean ms':>9s} {'median / OMPL':>14s}")
         for name, r in res.items():
             med, mean = 1e3 * float(np.median(r["times"])), 1e3 * float(np.mean(r["times"]))

@@ -32,7 +32,9 @@ def load() -> str:
     return f"load average {one:.2f} {five:.2f} {fifteen:.2f} on {os.cpu_count() or 0} cores"
 
 
-def bench_eval(env: str, robot_name: str | None, episodes: int, workers: int, seed: int, max_nodes: int) -> dict[str, float]:
+def bench_eval(
+    env: str, robot_name: str | None, episodes: int, workers: int, seed: int, max_nodes: int
+) -> dict[str, float]:
     from pointplan.distributed import ScenarioProblems, connect
     from pointplan.evaluation import evaluate
     from pointplan.planners import make_planner
@@ -62,7 +64,8 @@ def bench_eval(env: str, robot_name: str | None, episodes: int, workers: int, se
 
     untimed = lambda m: {k: v for k, v in m.items() if not k.startswith("time")}  # noqa: E731
     same = untimed(serial.metrics()) == untimed(parallel.metrics()) and all(
-        (a.tag, a.success, a.nodes, a.collision_checks) == (b.tag, b.success, b.nodes, b.collision_checks) and np.array_equal(a.path, b.path)
+        (a.tag, a.success, a.nodes, a.collision_checks) == (b.tag, b.success, b.nodes, b.collision_checks)
+        and np.array_equal(a.path, b.path)
         for a, b in zip(serial.records, parallel.records, strict=True)
     )
     cold, warm = times
@@ -80,12 +83,21 @@ def bench_eval(env: str, robot_name: str | None, episodes: int, workers: int, se
     return {"serial_s": t_serial, "cold_s": cold, "warm_s": warm, "ray_start_s": t_start, "identical": float(same)}
 
 
-def bench_train(env: str, steps: int, workers: int, updates_per_step: float = 0.5, robot: str | None = None, observation: str | None = None) -> None:
+def bench_train(
+    env: str,
+    steps: int,
+    workers: int,
+    updates_per_step: float = 0.5,
+    robot: str | None = None,
+    observation: str | None = None,
+) -> None:
     from pointplan.learning.train import TrainConfig, train
     from pointplan.models.actor_critic import NetConfig
     from pointplan.models.encoders import EncoderConfig
 
-    net = NetConfig(EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True)
+    net = NetConfig(
+        EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True
+    )
     cfg = TrainConfig(
         env=env,
         robot=robot,
@@ -124,10 +136,15 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--train-env", default="empty2d")
-    ap.add_argument("--train-robot", help="robot of a 3D training scenario (sphere3d or sshape; its observation is `local`)")
+    ap.add_argument(
+        "--train-robot", help="robot of a 3D training scenario (sphere3d or sshape; its observation is `local`)"
+    )
     ap.add_argument("--train-steps", type=int, default=6000, help="0 skips the training part")
     ap.add_argument(
-        "--train-updates-per-step", type=float, default=0.5, help="gradient steps per env step (default: %(default)s, as in docs/guide/training.md)"
+        "--train-updates-per-step",
+        type=float,
+        default=0.5,
+        help="gradient steps per env step (default: %(default)s, as in docs/guide/training.md)",
     )
     args = ap.parse_args()
     print(load())

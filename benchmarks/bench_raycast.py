@@ -43,7 +43,9 @@ def mix(rng: np.random.Generator) -> list[Shape]:
     for _ in range(2):
         a = rng.uniform(-1, 1, 3)
         out.append(Capsule(a, a + rng.normal(size=3) * 0.3, rng.uniform(0.05, 0.2)))
-    out += [Cylinder(rng.uniform(-1, 1, 3), rng.uniform(0.05, 0.3), rng.uniform(0.2, 0.8), rotation(rng)) for _ in range(2)]
+    out += [
+        Cylinder(rng.uniform(-1, 1, 3), rng.uniform(0.05, 0.3), rng.uniform(0.2, 0.8), rotation(rng)) for _ in range(2)
+    ]
     out += [Cone(rng.uniform(-1, 1, 3), rng.uniform(0.05, 0.3), rng.uniform(0.2, 0.8), rotation(rng)) for _ in range(2)]
     return out
 
@@ -53,7 +55,9 @@ def mesh(rng: np.random.Generator) -> list[Shape]:
     return [Mesh(ico.vertices + rng.uniform(-0.5, 0.5, 3), ico.faces)]
 
 
-def rays_per_second(make: Callable[[np.random.Generator], list[Shape]], n_scenes: int, seconds: float) -> tuple[float, float]:
+def rays_per_second(
+    make: Callable[[np.random.Generator], list[Shape]], n_scenes: int, seconds: float
+) -> tuple[float, float]:
     rng = np.random.default_rng(0)
     worlds = [CollisionWorld.from_shapes(make(rng), 3) for _ in range(n_scenes)]
     world = worlds[0] if n_scenes == 1 else CollisionWorld.stack(worlds)

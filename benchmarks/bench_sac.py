@@ -25,12 +25,18 @@ from pointplan.models.encoders import EncoderConfig
 from pointplan.scenes.scenarios import Narrow2DScenario
 
 CONFIGS = {
-    "paper (3x256, separate, action on points)": NetConfig(EncoderConfig(width=256), head_width=256, critic_action="points"),
-    "3x256, separate, action after pooling": NetConfig(EncoderConfig(width=256), head_width=256, critic_action="pooled"),
+    "paper (3x256, separate, action on points)": NetConfig(
+        EncoderConfig(width=256), head_width=256, critic_action="points"
+    ),
+    "3x256, separate, action after pooling": NetConfig(
+        EncoderConfig(width=256), head_width=256, critic_action="pooled"
+    ),
     "3x256, shared": NetConfig(EncoderConfig(width=256), head_width=256, critic_action="pooled", shared_encoder=True),
     "3x128, shared": NetConfig(EncoderConfig(width=128), head_width=128, critic_action="pooled", shared_encoder=True),
     "3x64, separate, action after pooling": NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled"),
-    "3x64, shared (default)": NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True),
+    "3x64, shared (default)": NetConfig(
+        EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True
+    ),
     "3x32, shared": NetConfig(EncoderConfig(width=32), head_width=32, critic_action="pooled", shared_encoder=True),
 }
 
@@ -81,9 +87,24 @@ def image_buffer(rng: np.random.Generator, episodes: int = 16) -> EpisodeReplay:
             qn.append(core.q.copy())
             a.append(act)
             col.append(info["collided"])
-        obs_a, q_a, qn_a, a_a, col_a = np.stack(obs, 1), np.stack(q, 1), np.stack(qn, 1), np.stack(a, 1), np.stack(col, 1)
+        obs_a, q_a, qn_a, a_a, col_a = (
+            np.stack(obs, 1),
+            np.stack(q, 1),
+            np.stack(qn, 1),
+            np.stack(a, 1),
+            np.stack(col, 1),
+        )
         for i in range(8):
-            buf.add_episode(obs_a[i], obs_a[i], q_a[i], qn_a[i], np.broadcast_to(core.goal[i], (50, 2)), a_a[i], np.linalg.norm(a_a[i], axis=1), col_a[i])
+            buf.add_episode(
+                obs_a[i],
+                obs_a[i],
+                q_a[i],
+                qn_a[i],
+                np.broadcast_to(core.goal[i], (50, 2)),
+                a_a[i],
+                np.linalg.norm(a_a[i], axis=1),
+                col_a[i],
+            )
     return buf
 
 
@@ -93,14 +114,21 @@ def bench_image(duration: float, device: str) -> None:
     rng = np.random.default_rng(0)
     buf = image_buffer(rng)
     robot = Narrow2DScenario().robot
-    net = NetConfig(EncoderConfig("cnn", 64, 3), head_width=64, head_layers=3, critic_action="pooled", shared_encoder=True)
+    net = NetConfig(
+        EncoderConfig("cnn", 64, 3), head_width=64, head_layers=3, critic_action="pooled", shared_encoder=True
+    )
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {device}")
     rates = {}
     for layout in ("channels-last (shipped)", "default layout"):
         torch.manual_seed(0)
         sac = SAC(robot, EnvConfig(observation="image"), (1, 64, 64), net, SACConfig(), device=device)
         if layout == "default layout":
-            for m in (m for part in (sac.actor, sac.critic, sac.critic_target, sac.actor_avg) if part is not None for m in part.modules()):
+            for m in (
+                m
+                for part in (sac.actor, sac.critic, sac.critic_target, sac.actor_avg)
+                if part is not None
+                for m in part.modules()
+            ):
                 if isinstance(m, torch.nn.Conv2d):
                     m.to(memory_format=torch.contiguous_format)  # type: ignore[call-overload]
         sac.update(buf.sample(256, rng))

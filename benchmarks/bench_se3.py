@@ -40,7 +40,9 @@ def calls_per_second(fn: Callable[[], object], budget: float) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="0.1 s per measurement instead of 0.5 s")
-    parser.add_argument("--birrt", action="store_true", help="also time Bi-RRT (3,000 nodes) on Slot test problems 1-3 with each path")
+    parser.add_argument(
+        "--birrt", action="store_true", help="also time Bi-RRT (3,000 nodes) on Slot test problems 1-3 with each path"
+    )
     args = parser.parse_args()
     budget = 0.1 if args.quick else 0.5
     robot, reference = SShape(), NumpySShape()
@@ -78,9 +80,12 @@ def birrt_speed() -> None:
             res = BiRRT(robot, max_nodes=3000, seed=1).plan(problem)
             runs[compiled] = (time.perf_counter() - t, res)
         (t_np, a), (t_c, b) = runs[False], runs[True]
-        same = (a.success, a.nodes, a.collision_checks, len(a.path)) == (b.success, b.nodes, b.collision_checks, len(b.path)) and np.allclose(
-            a.path, b.path, atol=1e-9
-        )
+        same = (a.success, a.nodes, a.collision_checks, len(a.path)) == (
+            b.success,
+            b.nodes,
+            b.collision_checks,
+            len(b.path),
+        ) and np.allclose(a.path, b.path, atol=1e-9)
         print(f"{i:<18}{t_np:>9.2f}{t_c:>12.2f}{t_np / t_c:>7.2f}x{b.nodes:>7}  {same}")
 
 

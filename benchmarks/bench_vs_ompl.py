@@ -220,7 +220,30 @@ def step_parts(planner: Any, problems: list[Problem], reps: int = 200) -> dict[s
     from pointplan.planners import _policy_kernels as K
 
     @numba.njit
-    def loop(kind, reps, q, goal, u, count, n_points, idx, pts, nrm, s32, wflat, layout, scale, low, high, bc, br, bh, ws, tw, nq):  # type: ignore[no-untyped-def]
+    def loop(  # type: ignore[no-untyped-def]
+        kind,
+        reps,
+        q,
+        goal,
+        u,
+        count,
+        n_points,
+        idx,
+        pts,
+        nrm,
+        s32,
+        wflat,
+        layout,
+        scale,
+        low,
+        high,
+        bc,
+        br,
+        bh,
+        ws,
+        tw,
+        nq,
+    ):
         for _ in range(reps):
             if kind == 0:
                 K._select(u, count, n_points, idx)
@@ -249,7 +272,26 @@ def step_parts(planner: Any, problems: list[Problem], reps: int = 200) -> dict[s
         ws = K._workspace(n_points, layout, 2)
         tw, nq = np.array([0.05, 0.05]), np.empty(2)
         for kind, name in enumerate(names):
-            args = (p.start, p.goal, u, count, n_points, idx, pts, nrm, s32, wflat, layout, scale, p.scene.low, p.scene.high, *boxes, ws, tw, nq)
+            args = (
+                p.start,
+                p.goal,
+                u,
+                count,
+                n_points,
+                idx,
+                pts,
+                nrm,
+                s32,
+                wflat,
+                layout,
+                scale,
+                p.scene.low,
+                p.scene.high,
+                *boxes,
+                ws,
+                tw,
+                nq,
+            )
             loop(kind, 1, *args)
             t = time.perf_counter()
             loop(kind, reps, *args)
@@ -285,7 +327,9 @@ def main() -> None:
             pl.plan(p)
         if hasattr(pl, "reset"):  # Bi-RRT: the same draws as `pointplan eval`
             pl.reset()
-    rows: dict[str, dict[str, list[float]]] = {n: {"time": [], "cpu": [], "ok": [], "nodes": [], "checks": [], "length": []} for n in names}
+    rows: dict[str, dict[str, list[float]]] = {
+        n: {"time": [], "cpu": [], "ok": [], "nodes": [], "checks": [], "length": []} for n in names
+    }
     split = {"observe": 0.0, "network": 0.0, "motion": 0.0, "goal": 0.0, "compiled": 0.0, "steps": 0}
     scene_prep: list[float] = []
     gc.collect()
@@ -298,7 +342,8 @@ def main() -> None:
             order = names[i % len(names) :] + names[: i % len(names)]
             for n in order:
                 pl = planners[n]
-                if n in ("policy", "policy-python", "policy-nogreedy"):  # the observer's point set of a new scene, timed apart
+                # the observer's point set of a new scene, timed apart
+                if n in ("policy", "policy-python", "policy-nogreedy"):
                     t = time.perf_counter()
                     pl.engine.observer.set_scene(0, p.scene)  # computes and caches the points
                     scene_prep.append(time.perf_counter() - t)
@@ -314,7 +359,9 @@ def main() -> None:
                 r["ok"].append(float(ok))
                 r["nodes"].append(res.nodes)
                 r["checks"].append(res.collision_checks)
-                r["length"].append(path_length(robot, res.path) + float(robot.distance(res.path[-1], p.goal)) if ok else math.nan)
+                r["length"].append(
+                    path_length(robot, res.path) + float(robot.distance(res.path[-1], p.goal)) if ok else math.nan
+                )
                 if n == "policy" and "time_split" in res.info:
                     for k in split:
                         split[k] += res.info["time_split"].get(k, 0.0)
@@ -322,8 +369,12 @@ def main() -> None:
     finally:
         gc.enable()
 
-    print(f"2D-Narrow test problems 0..{args.problems - 1} (seed {args.seed}), one at a time; torch default threads {default_threads}")
-    print("wall: time per plan() call; cpu: this thread's CPU time in it (what other jobs on the machine disturb least)")
+    print(
+        f"2D-Narrow test problems 0..{args.problems - 1} (seed {args.seed}), one at a time; torch default threads {default_threads}"
+    )
+    print(
+        "wall: time per plan() call; cpu: this thread's CPU time in it (what other jobs on the machine disturb least)"
+    )
     header = f"{'planner':<14} {'success':>8} {'wall median':>12} {'wall mean':>10} {'cpu median':>11} {'cpu mean':>9} {'nodes':>7} {'checks':>8} {'length':>7}"
     print(header)
     print("-" * len(header))

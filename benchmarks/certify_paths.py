@@ -85,14 +85,24 @@ def obstacle(shape: Shape, dim: int) -> Obstacle:
                 np.array([*shape.center, 0.0]),
                 float(np.linalg.norm(size) / 2),
             )
-        return Obstacle(coal.Box(*size), _tf(shape.rotation, shape.center), np.asarray(shape.center, np.float64), float(np.linalg.norm(size) / 2))
+        return Obstacle(
+            coal.Box(*size),
+            _tf(shape.rotation, shape.center),
+            np.asarray(shape.center, np.float64),
+            float(np.linalg.norm(size) / 2),
+        )
     if isinstance(shape, Sphere):
         c = np.array([*shape.center, 0.0]) if dim == 2 else np.asarray(shape.center, np.float64)
         return Obstacle(coal.Sphere(float(shape.radius)), _tf(np.eye(3), c), c, float(shape.radius))
     if isinstance(shape, Capsule):
         a, b = (np.array([*p, 0.0]) if dim == 2 else np.asarray(p, np.float64) for p in (shape.a, shape.b))
         length = float(np.linalg.norm(b - a))
-        return Obstacle(coal.Capsule(float(shape.radius), length), _tf(_axis_frame(b - a), (a + b) / 2), (a + b) / 2, length / 2 + float(shape.radius))
+        return Obstacle(
+            coal.Capsule(float(shape.radius), length),
+            _tf(_axis_frame(b - a), (a + b) / 2),
+            (a + b) / 2,
+            length / 2 + float(shape.radius),
+        )
     if isinstance(shape, (Cylinder, Cone)):
         kind = coal.Cylinder if isinstance(shape, Cylinder) else coal.Cone
         return Obstacle(
@@ -108,7 +118,9 @@ def obstacle(shape: Shape, dim: int) -> Obstacle:
         model.addTriangles(np.ascontiguousarray(shape.faces, np.int64))
         model.endModel()
         c = (shape.vertices.min(0) + shape.vertices.max(0)) / 2
-        return Obstacle(model, _tf(np.eye(3), np.zeros(3)), c, float(np.sqrt(np.max(np.sum((shape.vertices - c) ** 2, -1)))), shape)
+        return Obstacle(
+            model, _tf(np.eye(3), np.zeros(3)), c, float(np.sqrt(np.max(np.sum((shape.vertices - c) ** 2, -1)))), shape
+        )
     raise TypeError(f"certify_paths does not handle {type(shape).__name__}")
 
 
@@ -118,7 +130,12 @@ def winding_inside(mesh: Mesh, p: Array) -> bool:
     a, b, c = v[:, 0], v[:, 1], v[:, 2]
     la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
     num = np.einsum("fi,fi->f", a, np.cross(b, c))
-    den = la * lb * lc + np.einsum("fi,fi->f", a, b) * lc + np.einsum("fi,fi->f", a, c) * lb + np.einsum("fi,fi->f", b, c) * la
+    den = (
+        la * lb * lc
+        + np.einsum("fi,fi->f", a, b) * lc
+        + np.einsum("fi,fi->f", a, c) * lb
+        + np.einsum("fi,fi->f", b, c) * la
+    )
     return bool(abs(np.sum(np.arctan2(num, den)) / (2 * np.pi)) > 0.5)
 
 
@@ -205,7 +222,14 @@ def worst_clearance(robot: Robot, scene: Scene, path: Array, spacing: float) -> 
     return worst
 
 
-def plan_all(name: str, robot: Robot, problems: list[Problem], checkpoint: str | None, max_nodes: int, observation: str | None = None) -> list[Any]:
+def plan_all(
+    name: str,
+    robot: Robot,
+    problems: list[Problem],
+    checkpoint: str | None,
+    max_nodes: int,
+    observation: str | None = None,
+) -> list[Any]:
     if name == "policy":  # with the planner's defaults for the robot (its escape included)
         planner = make_planner("policy", robot, checkpoint=checkpoint, observation=None if checkpoint else observation)
         return [planner.plan(p) for p in problems]  # one by one, as the evaluator plans (greedy goal test included)
@@ -225,7 +249,9 @@ def certify(scene_name: str, robot_name: str | None, planner: str, args: argpars
     n = args.episodes_2d if robot.dim == 2 else args.episodes
     problems = scenario.problems("test", n, seed=args.seed)
     t0 = time.perf_counter()
-    results = plan_all(planner, robot, problems, args.checkpoint, args.max_nodes, args.observation if robot.dim == 3 else None)
+    results = plan_all(
+        planner, robot, problems, args.checkpoint, args.max_nodes, args.observation if robot.dim == 3 else None
+    )
     t_plan = time.perf_counter() - t0
     count = {"claimed": [0, 0, 0.0], "accepted": [0, 0, 0.0]}  # paths, touching, deepest
     for prob, res in zip(problems, results):
@@ -250,9 +276,16 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenes", nargs="*", default=["narrow2d", *SCENES_3D])
     p.add_argument("--robots", nargs="*", default=["sphere3d", "sshape"], help="3D robots")
-    p.add_argument("--planners", nargs="*", default=None, help="default: birrt straight policy (2D), birrt straight (3D)")
-    p.add_argument("--checkpoint", help="policy checkpoint for 3D scenes (default: the policy shipped for the robot; 2D: the shipped policy)")
-    p.add_argument("--observation", help="3D, without --checkpoint: which shipped policy (global or local; default: the robot's)")
+    p.add_argument(
+        "--planners", nargs="*", default=None, help="default: birrt straight policy (2D), birrt straight (3D)"
+    )
+    p.add_argument(
+        "--checkpoint",
+        help="policy checkpoint for 3D scenes (default: the policy shipped for the robot; 2D: the shipped policy)",
+    )
+    p.add_argument(
+        "--observation", help="3D, without --checkpoint: which shipped policy (global or local; default: the robot's)"
+    )
     p.add_argument("--episodes", type=int, default=100, help="test problems per 3D scene")
     p.add_argument("--episodes-2d", type=int, default=400, help="2D-Narrow test problems")
     p.add_argument("--spacing", type=float, default=0.001)

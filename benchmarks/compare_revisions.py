@@ -58,10 +58,12 @@ def main() -> int:
         ap.error("give the benchmark after --")
     with tempfile.TemporaryDirectory() as tmp:
         base_tree = Path(tmp) / "base"
-        subprocess.run(["git", "worktree", "add", "--detach", str(base_tree), args.base], cwd=ROOT, check=True, capture_output=True)
+        subprocess.run(
+            ["git", "worktree", "add", "--detach", str(base_tree), args.base], cwd=ROOT, check=True, capture_output=True
+        )
         try:
             trees = {"current": ROOT, "base": base_tree}
-            for name, tree in trees.items():  # warm-up: numba caches, imports
+            for tree in trees.values():  # warm-up: numba caches, imports
                 run(tree, command)
             values: dict[str, list[dict[tuple[str, ...], float]]] = {"current": [], "base": []}
             for r in range(args.rounds):
@@ -69,7 +71,9 @@ def main() -> int:
                     values[name].append(parse(run(trees[name], command), args.column))
                 print(f"round {r + 1}/{args.rounds} done", file=sys.stderr)
         finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(base_tree)], cwd=ROOT, check=False, capture_output=True)
+            subprocess.run(
+                ["git", "worktree", "remove", "--force", str(base_tree)], cwd=ROOT, check=False, capture_output=True
+            )
     keys = [k for k in values["current"][0] if all(k in v for v in values["current"] + values["base"])]
     print(f"{' '.join(command)}: median over {args.rounds} rounds, current vs {args.base}")
     for k in keys:

@@ -36,7 +36,12 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--attempts", type=int, nargs="+", default=[1, 2, 4, 8])
     ap.add_argument("--action-noise", type=float, default=1.0)
-    ap.add_argument("--escape", type=int, default=None, help="sampled steps after a stall (default: the planner's for the robot; 0: off)")
+    ap.add_argument(
+        "--escape",
+        type=int,
+        default=None,
+        help="sampled steps after a stall (default: the planner's for the robot; 0: off)",
+    )
     ap.add_argument("--json", help="write the rows here")
     args = ap.parse_args()
     if any(k < 1 for k in args.attempts):
@@ -53,7 +58,9 @@ def main() -> None:
     problems = scenario.problems(args.split, args.episodes, seed=args.seed)
     rows = []
     for k in args.attempts:
-        planner = PolicyPlanner(policy, robot=scenario.robot, attempts=k, action_noise=args.action_noise, escape=args.escape)
+        planner = PolicyPlanner(
+            policy, robot=scenario.robot, attempts=k, action_noise=args.action_noise, escape=args.escape
+        )
         rep = evaluate(planner, problems, scenario.robot, progress=False)
         m = rep.metrics()
         row = {
@@ -71,7 +78,10 @@ def main() -> None:
 
             band = np.floor(np.asarray(widths) / BAR_THICKNESS).astype(int)
             ok = np.array([r.success for r in rep.records])
-            row["by_width"] = {f"{b}-{b + 1} bars": [int(ok[band == b].sum()), int((band == b).sum())] for b in sorted(set(band.tolist()))}
+            row["by_width"] = {
+                f"{b}-{b + 1} bars": [int(ok[band == b].sum()), int((band == b).sum())]
+                for b in sorted(set(band.tolist()))
+            }
         rows.append(row)
         print(
             f"attempts {k:2d}: {100 * row['success']:5.1f}% of {m['episodes']} {args.split} problems in {scenario.name}, "
@@ -83,7 +93,14 @@ def main() -> None:
     if args.json:
         with open(args.json, "w") as f:
             json.dump(
-                {"checkpoint": ckpt, "escape": args.escape, "split": args.split, "episodes": args.episodes, "action_noise": args.action_noise, "rows": rows},
+                {
+                    "checkpoint": ckpt,
+                    "escape": args.escape,
+                    "split": args.split,
+                    "episodes": args.episodes,
+                    "action_noise": args.action_noise,
+                    "rows": rows,
+                },
                 f,
                 indent=1,
             )

@@ -29,7 +29,9 @@ def run(args: argparse.Namespace) -> None:
     sc = make_scenario(args.env, robot=args.robot)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    done = {json.loads(line)["index"] for line in out.read_text().splitlines() if line.strip()} if out.exists() else set()
+    done = (
+        {json.loads(line)["index"] for line in out.read_text().splitlines() if line.strip()} if out.exists() else set()
+    )
     if done:
         print(f"{out}: {len(done)} problems done already, skipped", flush=True)
     for i in range(args.start, args.stop, args.every):
@@ -50,7 +52,9 @@ def run(args: argparse.Namespace) -> None:
             "path_length": path_length(sc.robot, res.path) if ok else None,
             "time_s": elapsed,
             "extra": {
-                k: float(v) if isinstance(v, (int, float, np.floating)) else str(v) for k, v in problem.scene.__dict__.get("slot", {}).items() if k == "width"
+                k: float(v) if isinstance(v, (int, float, np.floating)) else str(v)
+                for k, v in problem.scene.__dict__.get("slot", {}).items()
+                if k == "width"
             },
         }
         with out.open("a") as f:
@@ -70,7 +74,9 @@ def summary(args: argparse.Namespace) -> None:
     print(f"collision checks mean {np.mean([r['collision_checks'] for r in rows]):.0f}")
     if ok:
         print(f"path length mean {np.mean([r['path_length'] for r in ok]):.3f}")
-    print(f"time mean {np.mean([r['time_s'] for r in rows]):.1f} s, median {np.median([r['time_s'] for r in rows]):.1f} s")
+    print(
+        f"time mean {np.mean([r['time_s'] for r in rows]):.1f} s, median {np.median([r['time_s'] for r in rows]):.1f} s"
+    )
     print(f"claims disagree {sum(r['success'] != r['claimed'] for r in rows)}")
 
 

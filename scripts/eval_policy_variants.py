@@ -37,7 +37,10 @@ def average_policy(paths: list[str]) -> Policy:
     if any(set(s) != set(states[0]) or any(s[k].shape != states[0][k].shape for k in s) for s in states):
         sys.exit("--average needs checkpoints of one network layout")
     mean = {
-        k: (sum(s[k].double() for s in states) / len(states)).to(states[0][k].dtype) if states[0][k].is_floating_point() else states[0][k] for k in states[0]
+        k: (sum(s[k].double() for s in states) / len(states)).to(states[0][k].dtype)
+        if states[0][k].is_floating_point()
+        else states[0][k]
+        for k in states[0]
     }
     avg = copy.deepcopy(base)
     avg.actor.load_state_dict(mean)
@@ -53,7 +56,13 @@ def main() -> int:
     ap.add_argument("--val-episodes", type=int, default=1000)
     ap.add_argument("--test-episodes", type=int, default=400)
     ap.add_argument("--obs-seeds", type=int, nargs="+", default=[0], help="seeds of the observed point subsets")
-    ap.add_argument("--problem-seeds", type=int, nargs="+", default=[0], help="seeds of the start/goal draws (0: the problem sets of pointplan eval)")
+    ap.add_argument(
+        "--problem-seeds",
+        type=int,
+        nargs="+",
+        default=[0],
+        help="seeds of the start/goal draws (0: the problem sets of pointplan eval)",
+    )
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
@@ -84,9 +93,15 @@ def main() -> int:
                     fails = np.flatnonzero(~ok).tolist()
                     failed, total, rows = failed + len(fails), total + len(ok), rows + 1
                     shown = " ".join(map(str, fails[:12])) + (" ..." if len(fails) > 12 else "")
-                    print(f"{name:<28} {rule:<6} {split:<5} {pseed:>4} {seed:>4} {ok.mean():>8.2%} {nodes:>6.2f}  {shown}", flush=True)
+                    print(
+                        f"{name:<28} {rule:<6} {split:<5} {pseed:>4} {seed:>4} {ok.mean():>8.2%} {nodes:>6.2f}  {shown}",
+                        flush=True,
+                    )
         if rows > 1:
-            print(f"{name:<28} {'all':<6} {'all':<5} {'':>4} {'':>4} {1 - failed / total:>8.2%} {'':>6}  {failed} failures of {total}", flush=True)
+            print(
+                f"{name:<28} {'all':<6} {'all':<5} {'':>4} {'':>4} {1 - failed / total:>8.2%} {'':>6}  {failed} failures of {total}",
+                flush=True,
+            )
     return 0
 
 

@@ -44,13 +44,31 @@ def main() -> None:
         if not rows or "start_back" not in rows[0]:
             raise SystemExit(f"{path}: not a curriculum run's metrics (no start_back column)")
         t = [x / 60 for x in column(rows, "wall_time_s")]
-        (line,) = axes[0].plot(t, column(rows, "val_success_escape"), marker="o", ms=3, label=f"{label}, with the escape")
-        axes[0].plot(t, column(rows, "val_success"), marker=".", ms=3, ls="--", color=line.get_color(), label=f"{label}, mean action")
+        (line,) = axes[0].plot(
+            t, column(rows, "val_success_escape"), marker="o", ms=3, label=f"{label}, with the escape"
+        )
+        axes[0].plot(
+            t,
+            column(rows, "val_success"),
+            marker=".",
+            ms=3,
+            ls="--",
+            color=line.get_color(),
+            label=f"{label}, mean action",
+        )
         axes[1].plot(t, column(rows, "start_back"), marker="o", ms=3, color=line.get_color(), label=label)
     for k, m in enumerate(args.marks):
         axes[1].axhline(m, color="grey", lw=0.8, ls=":")
         if k < len(args.mark_labels):
-            axes[1].text(0.01, m, args.mark_labels[k], transform=axes[1].get_yaxis_transform(), va="bottom", fontsize=7, color="grey")
+            axes[1].text(
+                0.01,
+                m,
+                args.mark_labels[k],
+                transform=axes[1].get_yaxis_transform(),
+                va="bottom",
+                fontsize=7,
+                color="grey",
+            )
     axes[0].set_ylabel("validation success")
     axes[0].set_ylim(0, args.ymax)
     axes[1].set_ylabel("starts reach back (steps before the goal)")

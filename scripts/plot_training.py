@@ -34,9 +34,15 @@ def main() -> None:
     ap.add_argument("csv", nargs="+", type=Path, help="metrics.csv files of training runs (pointplan train, bc, ppo)")
     ap.add_argument("--labels", nargs="*", help="one legend label per run (default: each run's folder name)")
     ap.add_argument("--offsets", nargs="*", type=float, help="seconds to add to each run's wall time (e.g. BC time)")
-    ap.add_argument("--ymin", type=float, default=0.0, help="lower end of the success axis (e.g. 0.95 to see late training)")
+    ap.add_argument(
+        "--ymin", type=float, default=0.0, help="lower end of the success axis (e.g. 0.95 to see late training)"
+    )
     ap.add_argument("--from-steps", type=float, default=0.0, help="leave out evaluations before this many env steps")
-    ap.add_argument("--metrics", nargs="*", help="the column plotted for each run (default: val_success; e.g. val_success_escape of pointplan ppo)")
+    ap.add_argument(
+        "--metrics",
+        nargs="*",
+        help="the column plotted for each run (default: val_success; e.g. val_success_escape of pointplan ppo)",
+    )
     ap.add_argument("-o", "--output", default="training.png", help="the PNG to write (default: %(default)s)")
     args = ap.parse_args()
     labels = args.labels or [p.parent.name for p in args.csv]

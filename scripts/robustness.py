@@ -101,7 +101,9 @@ def part_noise(n: int, seed: int, out: dict[str, Any], plot: str | None) -> None
         drop = [base] + [m for m in res.values() if m["group"] == "drop"]
         ax[1].plot([0] + [m["x"] for m in drop[1:]], [100 * m["success_rate"] for m in drop], "o-")
         ax[1].set_xlabel("scene points dropped (%)")
-        view = [("all points", base)] + [(lbl.replace("visible from ", "").replace(" only", ""), m) for lbl, m in res.items() if m["group"] == "view"]
+        view = [("all points", base)] + [
+            (lbl.replace("visible from ", "").replace(" only", ""), m) for lbl, m in res.items() if m["group"] == "view"
+        ]
         ax[2].bar(range(len(view)), [100 * m["success_rate"] for _, m in view])
         ax[2].set_xticks(range(len(view)), [v[0] for v in view], fontsize=7)
         ax[2].set_xlabel("occlusion (one viewpoint)")
@@ -121,7 +123,9 @@ def part_draws(sets: list[str], n: int, seed: int, obs_seeds: list[int], k: int,
         (f"mean action over K={k} draws", {"draws": k}),
         ("farthest-point subsets", {"observer_wrapper": perturbation(subset="fps")}),
     ]
-    print("| set | planner | success per observation seed | mean | nodes (mean) | problems whose outcome depends on the seed | time (mean) |")
+    print(
+        "| set | planner | success per observation seed | mean | nodes (mean) | problems whose outcome depends on the seed | time (mean) |"
+    )
     print("|---|---|---|---|---|---|---|")
     res = out.setdefault("draws", {})
     for name in sets:

@@ -52,7 +52,9 @@ def make_template(args: argparse.Namespace) -> None:
 
     robot = SShape()
     scene = reference_problem(args.width).scene
-    found = template_candidates(args.width, args.seed, args.tries, args.orders, args.ds, args.min_clearance, args.guide, args.margin, log=log)
+    found = template_candidates(
+        args.width, args.seed, args.tries, args.orders, args.ds, args.min_clearance, args.guide, args.margin, log=log
+    )
     for order, poses in found:
         ok = check_path(robot, Problem(scene, poses[0], poses[-1]), poses)
         print(
@@ -86,7 +88,9 @@ def demos(args: argparse.Namespace) -> None:
     done = {k for k, _ in paths}
     counts = {"solved": 0, "narrower than the template": 0, "failed": 0, "already": 0}
     new = 0
-    bar = tqdm(range(args.first, args.first + args.problems), desc="threading demos", unit="problem", disable=args.quiet)
+    bar = tqdm(
+        range(args.first, args.first + args.problems), desc="threading demos", unit="problem", disable=args.quiet
+    )
     try:
         for i in bar:
             index = demo_index(args.seed, args.demo_n, i)
@@ -130,7 +134,17 @@ def sweep_problems(args: argparse.Namespace) -> None:
     for i in chosen:
         p = sc.problem(args.split, args.first + i, seed=args.seed)
         t = time.perf_counter()
-        path, info = plan(robot, p, args.ds, i, args.max_nodes, log if args.verbose else None, args.min_clearance, args.tries, args.guide)
+        path, info = plan(
+            robot,
+            p,
+            args.ds,
+            i,
+            args.max_nodes,
+            log if args.verbose else None,
+            args.min_clearance,
+            args.tries,
+            args.guide,
+        )
         good = path is not None and bool(check_path(robot, p, path))
         if path is not None:
             info["steps"] = len(timed_path(robot, path)) - 1
@@ -141,18 +155,42 @@ def sweep_problems(args: argparse.Namespace) -> None:
 
 
 def parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="slot_expert.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        prog="slot_expert.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     sub = ap.add_subparsers(dest="cmd", required=True)
     t = sub.add_parser("template", help="plan and certify the threading template of the reference slot")
     t.add_argument("--out", required=True, help="the template file (np.savez)")
-    t.add_argument("--width", type=float, default=2.15, help="the reference slot's width, in bars of 0.036 (default: %(default)s, the shipped template's)")
+    t.add_argument(
+        "--width",
+        type=float,
+        default=2.15,
+        help="the reference slot's width, in bars of 0.036 (default: %(default)s, the shipped template's)",
+    )
     t.add_argument("--seed", type=int, default=2, help="seed of the sweeps' random stream (default: %(default)s)")
-    t.add_argument("--orders", nargs="+", default=["A", "E"], choices=["A", "E"], help="which end bar leads, tried in turn")
+    t.add_argument(
+        "--orders", nargs="+", default=["A", "E"], choices=["A", "E"], help="which end bar leads, tried in turn"
+    )
     t.add_argument("--tries", type=int, default=3, help="rounds of --orders (default: %(default)s)")
     t.add_argument("--ds", type=float, default=0.004, help="arc length between sweep poses (default: %(default)s)")
-    t.add_argument("--min-clearance", type=float, default=0.0015, help="clearance (coal) every sweep pose must have (default: %(default)s)")
-    t.add_argument("--guide", type=float, default=0.05, help="pull toward free poses of the next bend (0: off; default: %(default)s)")
-    t.add_argument("--margin", type=float, default=0.0, help="simplify for the body grown by this much (keeps that clearance; ask --min-clearance above it)")
+    t.add_argument(
+        "--min-clearance",
+        type=float,
+        default=0.0015,
+        help="clearance (coal) every sweep pose must have (default: %(default)s)",
+    )
+    t.add_argument(
+        "--guide",
+        type=float,
+        default=0.05,
+        help="pull toward free poses of the next bend (0: off; default: %(default)s)",
+    )
+    t.add_argument(
+        "--margin",
+        type=float,
+        default=0.0,
+        help="simplify for the body grown by this much (keeps that clearance; ask --min-clearance above it)",
+    )
     d = sub.add_parser("demos", help="the threading expert's demonstrations of training problems")
     d.add_argument("--save-demos", required=True, help="the demonstrations file (read first: its problems are skipped)")
     d.add_argument("--template", help="a template file (default: the shipped one, pointplan/data/slot_threading.npz)")
@@ -160,10 +198,19 @@ def parser() -> argparse.ArgumentParser:
     d.add_argument("--problems", type=int, default=3000)
     d.add_argument("--first", type=int, default=0)
     d.add_argument("--seed", type=int, default=0)
-    d.add_argument("--demo-n", type=int, default=3000, help="the n of the demonstration indices (the same for every process filling one file)")
+    d.add_argument(
+        "--demo-n",
+        type=int,
+        default=3000,
+        help="the n of the demonstration indices (the same for every process filling one file)",
+    )
     d.add_argument("--max-nodes", type=int, default=5000, help="Bi-RRT nodes where a straight edge collides")
     d.add_argument("--save-every", type=int, default=100)
-    d.add_argument("--copies", action="store_true", help="follow the template's symmetric copy turned least from the start (SlotThreading(copies=True))")
+    d.add_argument(
+        "--copies",
+        action="store_true",
+        help="follow the template's symmetric copy turned least from the start (SlotThreading(copies=True))",
+    )
     d.add_argument("--verbose", action="store_true", help="say why a problem failed")
     d.add_argument("--quiet", action="store_true", help="no progress bar")
     s = sub.add_parser("sweep", help="plan Slot problems with the sweep expert")
@@ -172,12 +219,24 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--max-bars", type=float, default=4.0)
     s.add_argument("--seed", type=int, default=5, help="problem seed")
     s.add_argument("--split", default="train")
-    s.add_argument("--first", type=int, default=0, help="the first workspace index (problems are workspaces first .. first + problems - 1)")
+    s.add_argument(
+        "--first",
+        type=int,
+        default=0,
+        help="the first workspace index (problems are workspaces first .. first + problems - 1)",
+    )
     s.add_argument("--ds", type=float, default=0.004, help="arc length between sweep poses")
     s.add_argument("--max-nodes", type=int, default=5000, help="Bi-RRT nodes for each end")
     s.add_argument("--min-clearance", type=float, default=0.0015, help="clearance (coal) every sweep pose must have")
-    s.add_argument("--guide", type=float, default=0.0, help="pull toward free poses of the next bend found beforehand (weight; 0: off)")
-    s.add_argument("--tries", type=int, default=1, help="rounds of the two sweeps (A first, E first), each from a new first pose")
+    s.add_argument(
+        "--guide",
+        type=float,
+        default=0.0,
+        help="pull toward free poses of the next bend found beforehand (weight; 0: off)",
+    )
+    s.add_argument(
+        "--tries", type=int, default=1, help="rounds of the two sweeps (A first, E first), each from a new first pose"
+    )
     s.add_argument("--only", type=int, nargs="*", help="plan only these of the problems (0-based)")
     s.add_argument("--verbose", action="store_true", help="say why a sweep gave up")
     return ap

@@ -24,13 +24,36 @@ import torch
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("checkpoint")
-    ap.add_argument("-o", "--output", required=True, help="prefix: writes PREFIX_thin.gif, PREFIX_wide.gif and PREFIX.png")
-    ap.add_argument("--thin", nargs=2, type=float, default=[2.0, 3.0], metavar=("LOW", "HIGH"), help="the thin band, bars (default: 2 3)")
-    ap.add_argument("--wide", nargs=2, type=float, default=[6.0, 8.0], metavar=("LOW", "HIGH"), help="the wide band, bars (default: 6 8)")
-    ap.add_argument("--tries", type=int, default=40, help="validation problems of a band rolled out from their start before the approach pose is used")
+    ap.add_argument(
+        "-o", "--output", required=True, help="prefix: writes PREFIX_thin.gif, PREFIX_wide.gif and PREFIX.png"
+    )
+    ap.add_argument(
+        "--thin",
+        nargs=2,
+        type=float,
+        default=[2.0, 3.0],
+        metavar=("LOW", "HIGH"),
+        help="the thin band, bars (default: 2 3)",
+    )
+    ap.add_argument(
+        "--wide",
+        nargs=2,
+        type=float,
+        default=[6.0, 8.0],
+        metavar=("LOW", "HIGH"),
+        help="the wide band, bars (default: 6 8)",
+    )
+    ap.add_argument(
+        "--tries",
+        type=int,
+        default=40,
+        help="validation problems of a band rolled out from their start before the approach pose is used",
+    )
     ap.add_argument("--escape", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--env", default="slot", choices=["slot", "slotfixed", "slotclassic"], help="the Slot scene (default: slot)")
+    ap.add_argument(
+        "--env", default="slot", choices=["slot", "slotfixed", "slotclassic"], help="the Slot scene (default: slot)"
+    )
     args = ap.parse_args()
     torch.set_num_threads(1)
 
@@ -78,7 +101,10 @@ def main() -> None:
         if found is None:
             found, where = solved(problems, True), "from the approach pose"
         if found is None:
-            print(f"{name}: no solved rollout among {len(problems)} problems of {low}-{high} bars, from the start or the approach pose", file=sys.stderr)
+            print(
+                f"{name}: no solved rollout among {len(problems)} problems of {low}-{high} bars, from the start or the approach pose",
+                file=sys.stderr,
+            )
             continue
         p, path, tried = found
         w = p.scene.__dict__["slot"]["width"] / BAR_THICKNESS
@@ -91,7 +117,15 @@ def main() -> None:
         chosen.append((p, path))
         titles.append(title)
     if chosen:
-        render_grid_3d([p for p, _ in chosen], robot, [q for _, q in chosen], output=f"{args.output}.png", cols=len(chosen), titles=titles, azim=-35)
+        render_grid_3d(
+            [p for p, _ in chosen],
+            robot,
+            [q for _, q in chosen],
+            output=f"{args.output}.png",
+            cols=len(chosen),
+            titles=titles,
+            azim=-35,
+        )
         print(f"wrote {args.output}.png")
 
 

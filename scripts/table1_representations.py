@@ -49,7 +49,9 @@ def net_config(encoder: str, width: int) -> object:
     from pointplan.models.actor_critic import NetConfig
     from pointplan.models.encoders import EncoderConfig
 
-    return NetConfig(EncoderConfig(encoder, width, 3), head_width=width, head_layers=3, critic_action="pooled", shared_encoder=True)
+    return NetConfig(
+        EncoderConfig(encoder, width, 3), head_width=width, head_layers=3, critic_action="pooled", shared_encoder=True
+    )
 
 
 def validate(actor: torch.nn.Module, robot: object, env: object, problems: list, horizon: int) -> float:
@@ -82,7 +84,15 @@ def test_eval(checkpoint: Path, episodes: int, json_path: Path, greedy: bool = T
 
 def run_bc(cell: str, args: argparse.Namespace) -> dict:
     from pointplan.envs.core import EnvConfig
-    from pointplan.learning.bc import BCConfig, fit_actor, generate_demos, load_demos, observation_shape, policy_payload, save_demos
+    from pointplan.learning.bc import (
+        BCConfig,
+        fit_actor,
+        generate_demos,
+        load_demos,
+        observation_shape,
+        policy_payload,
+        save_demos,
+    )
     from pointplan.models.actor_critic import Actor
     from pointplan.models.checkpoint import save_checkpoint, to_dict
     from pointplan.scenes.scenarios import make_scenario
@@ -96,7 +106,13 @@ def run_bc(cell: str, args: argparse.Namespace) -> dict:
     else:
         demos = generate_demos(scenario, args.bc_problems, seed=0, workers=args.workers)
         save_demos(demos_file, scenario, demos, "train", 0)
-    cfg = BCConfig(observation=observation, n_points=args.points, n_problems=args.bc_problems, epochs=args.bc_epochs, net=net_config(encoder, args.width))  # type: ignore[arg-type]
+    cfg = BCConfig(
+        observation=observation,
+        n_points=args.points,
+        n_problems=args.bc_problems,
+        epochs=args.bc_epochs,
+        net=net_config(encoder, args.width),  # type: ignore[arg-type]
+    )
     env = EnvConfig(observation=observation, n_points=args.points)
     torch.manual_seed(0)
     rng = np.random.default_rng(0)
@@ -121,7 +137,9 @@ def run_bc(cell: str, args: argparse.Namespace) -> dict:
             print(f"{cell} bc: resuming after {state['done']} epochs ({state_file})", file=sys.stderr)
     t0 = time.perf_counter() - before
     for done in range(start, args.bc_epochs + 1, args.bc_eval_every):
-        fit_actor(actor, opt, demos, robot, env, args.bc_eval_every, cfg.batch_size, rng, cfg.refresh_every, progress=False)
+        fit_actor(
+            actor, opt, demos, robot, env, args.bc_eval_every, cfg.batch_size, rng, cfg.refresh_every, progress=False
+        )
         success = validate(actor, robot, env, val, scenario.horizon)
         curve.append({"epochs": done, "val_success": success, "wall_time_s": time.perf_counter() - t0})
         print(f"{cell} bc: {done} epochs, val {success:.3f}", file=sys.stderr, flush=True)
@@ -145,7 +163,14 @@ def run_bc(cell: str, args: argparse.Namespace) -> dict:
         state_file.with_suffix(".tmp").replace(state_file)
     test = test_eval(run_dir / "best.pt", args.test_episodes, run_dir / "test.json")
     rollout = test_eval(run_dir / "best.pt", args.test_episodes, run_dir / "test_rollout.json", greedy=False)
-    return {"demo_problems": len(demos.problems), "demo_steps": len(demos), "curve": curve, "best_val": best, "test": test, "test_rollout": rollout}
+    return {
+        "demo_problems": len(demos.problems),
+        "demo_steps": len(demos),
+        "curve": curve,
+        "best_val": best,
+        "test": test,
+        "test_rollout": rollout,
+    }
 
 
 def run_rl(cell: str, args: argparse.Namespace) -> dict:
@@ -167,10 +192,17 @@ def run_rl(cell: str, args: argparse.Namespace) -> dict:
     run_dir = Path(args.runs) / f"{cell.replace(':', '_')}_rl"
     last = run_dir / "last.pt"
     res = train(cfg, run_dir, progress=not args.quiet, resume=last if last.exists() else None)
-    curve = [{"env_steps": h["env_steps"], "val_success": h["val_success"], "wall_time_s": h["wall_time_s"]} for h in res.history]
+    curve = [
+        {"env_steps": h["env_steps"], "val_success": h["val_success"], "wall_time_s": h["wall_time_s"]}
+        for h in res.history
+    ]
     old = Path(args.out) / f"{cell.replace(':', '_')}_rl.json"
     if old.exists() and last.exists():  # a resumed run: keep the curve of its earlier part
-        before = [c for c in json.loads(old.read_text()).get("curve", []) if c["env_steps"] < (curve[0]["env_steps"] if curve else 1e18)]
+        before = [
+            c
+            for c in json.loads(old.read_text()).get("curve", [])
+            if c["env_steps"] < (curve[0]["env_steps"] if curve else 1e18)
+        ]
         curve = before + curve
     if res.interrupted:
         return {"curve": curve, "interrupted": True}
@@ -193,7 +225,10 @@ def plot(out_dir: Path, path: str) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    for ax, method, xkey, xlabel in ((axes[0], "bc", "epochs", "epochs of behavioural cloning"), (axes[1], "rl", "env_steps", "environment steps (SAC + HER)")):
+    for ax, method, xkey, xlabel in (
+        (axes[0], "bc", "epochs", "epochs of behavioural cloning"),
+        (axes[1], "rl", "env_steps", "environment steps (SAC + HER)"),
+    ):
         for k, cell in enumerate(CELLS):  # one colour per cell in both panels
             f = out_dir / f"{cell.replace(':', '_')}_{method}.json"
             if not f.exists():
@@ -201,7 +236,14 @@ def plot(out_dir: Path, path: str) -> None:
             curve = json.loads(f.read_text())["curve"]
             if not curve:
                 continue
-            ax.plot([c[xkey] for c in curve], [100 * c["val_success"] for c in curve], marker="o", ms=3, color=f"C{k}", label=cell.replace(":", " / "))
+            ax.plot(
+                [c[xkey] for c in curve],
+                [100 * c["val_success"] for c in curve],
+                marker="o",
+                ms=3,
+                color=f"C{k}",
+                label=cell.replace(":", " / "),
+            )
         ax.set_xlabel(xlabel)
         ax.set_ylabel("validation success (%)")
         ax.set_ylim(0, 100)
@@ -218,7 +260,9 @@ def plot(out_dir: Path, path: str) -> None:
 
 
 def table(out_dir: Path) -> None:
-    print("| representation | encoder | paper BC | ours BC (rollout) | ours BC (planner) | paper RL | ours RL (rollout) | ours RL (planner) |")
+    print(
+        "| representation | encoder | paper BC | ours BC (rollout) | ours BC (planner) | paper RL | ours RL (rollout) | ours RL (planner) |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for cell, (p_bc, p_rl) in PAPER.items():
         obs, enc = CELLS[cell]
@@ -238,7 +282,9 @@ def main() -> int:
     ap.add_argument("--cells", nargs="*", default=list(CELLS), choices=list(CELLS))
     ap.add_argument("--points", type=int, default=128, help="points per observation (the paper: 128)")
     ap.add_argument("--width", type=int, default=64, help="layer width of encoders and heads")
-    ap.add_argument("--bc-problems", type=int, default=4000, help="Bi-RRT demonstration problems (shared by the BC cells)")
+    ap.add_argument(
+        "--bc-problems", type=int, default=4000, help="Bi-RRT demonstration problems (shared by the BC cells)"
+    )
     ap.add_argument("--bc-epochs", type=int, default=30)
     ap.add_argument("--bc-eval-every", type=int, default=5, help="epochs between validations")
     ap.add_argument("--rl-steps", type=int, default=300_000, help="environment steps per RL cell")
@@ -265,9 +311,14 @@ def main() -> int:
                 record = json.loads(done.read_text())
                 best = Path(args.runs) / f"{cell.replace(':', '_')}_{args.method}" / "best.pt"
                 if "test_rollout" not in record and best.exists():  # a cell run before the paper's protocol was added
-                    record["test_rollout"] = test_eval(best, args.test_episodes, best.parent / "test_rollout.json", greedy=False)
+                    record["test_rollout"] = test_eval(
+                        best, args.test_episodes, best.parent / "test_rollout.json", greedy=False
+                    )
                     done.write_text(json.dumps(record, indent=1))
-                    print(f"{cell} {args.method}: plain rollout on the test problems {record['test_rollout']['success_rate']:.3f}", file=sys.stderr)
+                    print(
+                        f"{cell} {args.method}: plain rollout on the test problems {record['test_rollout']['success_rate']:.3f}",
+                        file=sys.stderr,
+                    )
                 print(f"{cell} {args.method}: done already ({done}; --redo to run it again)", file=sys.stderr)
                 continue
             t0 = time.perf_counter()
@@ -288,7 +339,12 @@ def main() -> int:
             }
             (out / f"{cell.replace(':', '_')}_{args.method}.json").write_text(json.dumps(record, indent=1))
             test = result.get("test")
-            print(f"{cell} {args.method}: test success {test['success_rate']:.3f}" if test else f"{cell} {args.method}: interrupted", file=sys.stderr)
+            print(
+                f"{cell} {args.method}: test success {test['success_rate']:.3f}"
+                if test
+                else f"{cell} {args.method}: interrupted",
+                file=sys.stderr,
+            )
     if args.plot:
         plot(out, args.plot)
     if args.table:

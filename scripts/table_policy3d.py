@@ -36,7 +36,14 @@ PAPER = {
         "global": {"boxes3d": 89.0, "synthetic3d": 85.3, "ycb3d": 88.7, "dynamic3d": 86.0},
         # Slot (section 4.4): a `local` policy trained on Slot itself (--checkpoint-local)
         # slotclassic (our diagnostic reading of Slot: centred opening, one goal) shows the same 97.7
-        "local": {"boxes3d": 97.0, "synthetic3d": 87.3, "ycb3d": 96.0, "dynamic3d": 79.7, "slot": 97.7, "slotclassic": 97.7},
+        "local": {
+            "boxes3d": 97.0,
+            "synthetic3d": 87.3,
+            "ycb3d": 96.0,
+            "dynamic3d": 79.7,
+            "slot": 97.7,
+            "slotclassic": 97.7,
+        },
     },
 }
 SCENES = ["boxes3d", "synthetic3d", "ycb3d", "dynamic3d", "qureshi3d"]
@@ -80,7 +87,8 @@ def run(args: argparse.Namespace) -> None:
             m = report.metrics()
             cell_path(args.robot, scene, planner_name).parent.mkdir(parents=True, exist_ok=True)
             cell_path(args.robot, scene, planner_name).write_text(
-                json.dumps({**m, "env": scene, "robot": args.robot, "planner": planner_name, "seed": 0}, indent=2) + "\n"
+                json.dumps({**m, "env": scene, "robot": args.robot, "planner": planner_name, "seed": 0}, indent=2)
+                + "\n"
             )
             print(f"{scene} {planner_name}: {100 * m['success_rate']:.1f}%", flush=True)
 
@@ -126,9 +134,14 @@ def main() -> None:
     )
     ap.add_argument("--planners", nargs="+", default=["policy-global", "policy-local", "birrt"])
     ap.add_argument("--checkpoint-global", help="policy on global points (default: the shipped one)")
-    ap.add_argument("--checkpoint-local", help="policy on ray-cast points (default: the shipped one, Slot's own in slot)")
     ap.add_argument(
-        "--attempts", type=int, default=1, help="policy planners: rollouts per problem, the first with the mean action, the rest sampled (default: 1)"
+        "--checkpoint-local", help="policy on ray-cast points (default: the shipped one, Slot's own in slot)"
+    )
+    ap.add_argument(
+        "--attempts",
+        type=int,
+        default=1,
+        help="policy planners: rollouts per problem, the first with the mean action, the rest sampled (default: 1)",
     )
     ap.add_argument(
         "--escape",

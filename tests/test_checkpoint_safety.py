@@ -22,13 +22,23 @@ from pointplan.learning.replay import EpisodeReplay
 from pointplan.learning.sac import SAC, SACConfig
 from pointplan.learning.train import TrainConfig, train
 from pointplan.models.actor_critic import NetConfig
-from pointplan.models.checkpoint import FORMAT, VERSION, CheckpointError, find_non_plain, load_checkpoint, save_checkpoint, to_dict
+from pointplan.models.checkpoint import (
+    FORMAT,
+    VERSION,
+    CheckpointError,
+    find_non_plain,
+    load_checkpoint,
+    save_checkpoint,
+    to_dict,
+)
 from pointplan.models.convert import convert_checkpoint
 from pointplan.models.encoders import EncoderConfig
 from pointplan.models.policy import Policy, shipped_checkpoint
 from pointplan.robots import Disc2D
 
-SMALL = NetConfig(EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True)
+SMALL = NetConfig(
+    EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True
+)
 SRC = Path(pointplan.__file__).resolve().parents[1]
 REPO = Path(__file__).resolve().parents[1]
 
@@ -95,7 +105,21 @@ def test_malicious_checkpoint_is_refused_without_running(tmp_path: Path) -> None
 def test_cli_eval_refuses_a_malicious_checkpoint(tmp_path: Path) -> None:
     evil, marker = _evil(tmp_path)
     env = {**os.environ, "PYTHONPATH": str(SRC), "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
-    cmd = [sys.executable, "-m", "pointplan.cli", "eval", "--env", "narrow2d", "--planner", "policy", "--checkpoint", str(evil), "--episodes", "1", "--quiet"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "pointplan.cli",
+        "eval",
+        "--env",
+        "narrow2d",
+        "--planner",
+        "policy",
+        "--checkpoint",
+        str(evil),
+        "--episodes",
+        "1",
+        "--quiet",
+    ]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path)
     assert res.returncode != 0
     lines = res.stderr.strip().splitlines()
@@ -172,7 +196,14 @@ def test_save_refuses_cycles_and_header_keys(tmp_path: Path) -> None:
 # ------------------------------------------------------------------ (3) exact round trip of the trainer state
 def test_trainer_checkpoint_round_trip_is_bit_exact(tmp_path: Path) -> None:
     cfg = TrainConfig(
-        env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, eval_every=200, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32, policy_avg=0.01)
+        env="empty2d",
+        num_envs=4,
+        total_steps=400,
+        warmup_steps=100,
+        eval_every=200,
+        eval_episodes=5,
+        net=SMALL,
+        sac=SACConfig(batch_size=32, policy_avg=0.01),
     )
     train(cfg, tmp_path / "a", progress=False)
     state = load_checkpoint(tmp_path / "a" / "last.pt")
@@ -197,7 +228,16 @@ def _random_buffer(rng: np.random.Generator) -> EpisodeReplay:
         obs = rng.normal(size=(t + 1, 64, 4)).astype(np.float32)
         q = np.cumsum(rng.normal(scale=0.02, size=(t + 1, 2)), axis=0) + 0.5
         action = rng.uniform(-1, 1, (t, 2)).astype(np.float32)
-        buf.add_episode(obs[:-1], obs[1:], q[:-1], q[1:], np.repeat(q[-1:], t, 0), action, np.linalg.norm(action, axis=1), np.zeros(t, bool))
+        buf.add_episode(
+            obs[:-1],
+            obs[1:],
+            q[:-1],
+            q[1:],
+            np.repeat(q[-1:], t, 0),
+            action,
+            np.linalg.norm(action, axis=1),
+            np.zeros(t, bool),
+        )
     return buf
 
 
@@ -213,7 +253,10 @@ def test_resumed_updates_match_uninterrupted_ones(tmp_path: Path) -> None:
     torch.manual_seed(0)
     agent = SAC(Disc2D(), EnvConfig(), (64, 4), SMALL, sac_cfg)
     _updates(agent, buf, rng, 4)
-    save_checkpoint(tmp_path / "mid.pt", {"trainer": {"agent": agent.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}})
+    save_checkpoint(
+        tmp_path / "mid.pt",
+        {"trainer": {"agent": agent.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}},
+    )
     losses = _updates(agent, buf, rng, 4)
 
     torch.manual_seed(1)  # another initialisation and other random streams, all overwritten below
@@ -282,7 +325,9 @@ def test_convert_refuses_what_has_no_plain_form(tmp_path: Path, capsys: pytest.C
 
 
 # ------------------------------------------------------------------ the files in the repository
-@pytest.mark.parametrize("path", [shipped_checkpoint("disc2d"), REPO / "checkpoints" / "narrow2d_bcsac_retry_1390k_last.pt"])
+@pytest.mark.parametrize(
+    "path", [shipped_checkpoint("disc2d"), REPO / "checkpoints" / "narrow2d_bcsac_retry_1390k_last.pt"]
+)
 def test_committed_checkpoints_are_version_2_data_only(path: Path) -> None:
     if not path.exists():
         pytest.skip(f"{path} is not in this checkout")
@@ -292,7 +337,9 @@ def test_committed_checkpoints_are_version_2_data_only(path: Path) -> None:
 
 def test_only_the_conversion_unpickles() -> None:
     """No code under src/ may unpickle a file, except the explicit conversion."""
-    risky = re.compile(r"weights_only\s*=\s*False|allow_pickle\s*=\s*True|pickle\.loads?\(|torch\.jit\.load|dill|joblib")
+    risky = re.compile(
+        r"weights_only\s*=\s*False|allow_pickle\s*=\s*True|pickle\.loads?\(|torch\.jit\.load|dill|joblib"
+    )
     hits = {}
     for py in sorted((SRC / "pointplan").rglob("*.py")):
         found = [line.strip() for line in py.read_text().splitlines() if risky.search(line)]

@@ -16,7 +16,25 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_eval_writes_metrics(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "m.json"
-    assert main(["eval", "--env", "narrow2d", "--planner", "birrt", "--episodes", "5", "--seed", "0", "--json", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                "--env",
+                "narrow2d",
+                "--planner",
+                "birrt",
+                "--episodes",
+                "5",
+                "--seed",
+                "0",
+                "--json",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     m = json.loads(out.read_text())
     for key in ("success_rate", "nodes_mean", "collision_checks_mean", "path_length_mean", "time_mean_s", "episodes"):
         assert key in m
@@ -76,7 +94,9 @@ def captured_train(monkeypatch: pytest.MonkeyPatch) -> dict[str, object]:
 
     def fake_train(cfg, run_dir, **kw):  # type: ignore[no-untyped-def]
         seen.update(cfg=cfg, run_dir=Path(run_dir), **kw)
-        return train_mod.TrainResult(run_dir=Path(run_dir), best_success=0.5, steps=cfg.total_steps, wall_time_s=1.0, history=[])
+        return train_mod.TrainResult(
+            run_dir=Path(run_dir), best_success=0.5, steps=cfg.total_steps, wall_time_s=1.0, history=[]
+        )
 
     monkeypatch.setattr(train_mod, "train", fake_train)
     return seen
@@ -106,7 +126,9 @@ def _saved_run(tmp_path: Path, steps: int = 1000, **cfg_over: object) -> Path:
     return run
 
 
-def test_train_options_and_defaults_come_from_the_config_dataclasses(captured_train: dict[str, object], capsys: pytest.CaptureFixture[str]) -> None:
+def test_train_options_and_defaults_come_from_the_config_dataclasses(
+    captured_train: dict[str, object], capsys: pytest.CaptureFixture[str]
+) -> None:
     from pointplan.learning.sac import SACConfig
     from pointplan.learning.train import TrainConfig
 
@@ -147,11 +169,19 @@ def test_resume_takes_every_option_and_stays_in_its_folder(tmp_path: Path, captu
     ]
     assert main(args) == 0
     cfg = captured_train["cfg"]
-    assert (cfg.sac.init_alpha, cfg.sac.actor_delay, cfg.pool_size, cfg.pool_retries, cfg.total_steps) == (0.3, 9, 11, 2, 5000)  # type: ignore[attr-defined]
+    assert (cfg.sac.init_alpha, cfg.sac.actor_delay, cfg.pool_size, cfg.pool_retries, cfg.total_steps) == (  # type: ignore[attr-defined]
+        0.3,
+        9,
+        11,
+        2,
+        5000,
+    )
     assert captured_train["run_dir"] == run  # not a second folder
 
 
-def test_resume_from_a_policy_checkpoint_says_what_to_do(tmp_path: Path, captured_train: dict[str, object], capsys: pytest.CaptureFixture[str]) -> None:
+def test_resume_from_a_policy_checkpoint_says_what_to_do(
+    tmp_path: Path, captured_train: dict[str, object], capsys: pytest.CaptureFixture[str]
+) -> None:
     run = _saved_run(tmp_path)
     assert main(["train", "--quiet", "--resume", str(run / "best.pt"), "--steps", "5000"]) == 2
     err = capsys.readouterr().err
@@ -161,17 +191,32 @@ def test_resume_from_a_policy_checkpoint_says_what_to_do(tmp_path: Path, capture
     assert not captured_train
 
 
-def test_resume_with_steps_already_done_is_an_error(tmp_path: Path, captured_train: dict[str, object], capsys: pytest.CaptureFixture[str]) -> None:
+def test_resume_with_steps_already_done_is_an_error(
+    tmp_path: Path, captured_train: dict[str, object], capsys: pytest.CaptureFixture[str]
+) -> None:
     run = _saved_run(tmp_path, steps=1000)
     assert main(["train", "--quiet", "--resume", str(run / "last.pt"), "--steps", "800"]) == 2
     assert "done 1000 steps" in capsys.readouterr().err and not captured_train
 
 
 # ---------------------------------------------------------------------------- Ctrl-C and the progress bar
-TINY_TRAIN = ["--num-envs", "4", "--eval-episodes", "2", "--warmup-steps", "100", "--batch-size", "16", "--buffer-size", "2000"]
+TINY_TRAIN = [
+    "--num-envs",
+    "4",
+    "--eval-episodes",
+    "2",
+    "--warmup-steps",
+    "100",
+    "--batch-size",
+    "16",
+    "--buffer-size",
+    "2000",
+]
 
 
-def test_ctrl_c_in_train_saves_the_trainer_state_and_exits_130(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_ctrl_c_in_train_saves_the_trainer_state_and_exits_130(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     import signal
 
     import pointplan.learning.train as train_mod
@@ -186,13 +231,17 @@ def test_ctrl_c_in_train_saves_the_trainer_state_and_exits_130(tmp_path: Path, m
 
     monkeypatch.setattr(train_mod, "_learn", learn_then_ctrl_c)
     run = tmp_path / "run"
-    assert main(["train", "--quiet", "--steps", "2000", "--eval-every", "1000", *TINY_TRAIN, "--run-dir", str(run)]) == 130
+    assert (
+        main(["train", "--quiet", "--steps", "2000", "--eval-every", "1000", *TINY_TRAIN, "--run-dir", str(run)]) == 130
+    )
     err = capsys.readouterr().err
     assert f"interrupted at step 200: trainer state saved to {run / 'last.pt'}" in err and "Traceback" not in err
     assert load_checkpoint(run / "last.pt")["trainer"]["steps"] == 200
 
 
-def test_ctrl_c_in_eval_keeps_the_finished_problems(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_ctrl_c_in_eval_keeps_the_finished_problems(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     import pointplan.evaluation  # noqa: F401
 
     ev = sys.modules["pointplan.evaluation.evaluate"]  # (the package's `evaluate` is the function)
@@ -232,7 +281,9 @@ def test_training_progress_bar_stops_at_its_total(tmp_path: Path, capsys: pytest
         (["train", "--num-envs", "0"], "--num-envs", None),
     ],
 )
-def test_bad_counts_are_refused_naming_the_option(args: list[str], option: str, why: str | None, capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_counts_are_refused_naming_the_option(
+    args: list[str], option: str, why: str | None, capsys: pytest.CaptureFixture[str]
+) -> None:
     with pytest.raises(SystemExit) as e:
         main([*args, "--quiet"])
     assert e.value.code == 2
@@ -259,7 +310,10 @@ def _scene_file(tmp_path: Path, problems: list[dict[str, object]]) -> Path:
 def test_a_start_or_goal_in_collision_is_reported(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     scene = _scene_file(
         tmp_path,
-        [{"start": [0.2, 0.3], "goal": [0.8, 0.3], "tag": "fine"}, {"start": [0.5, 0.3], "goal": [0.8, 0.3], "tag": "inside"}],
+        [
+            {"start": [0.2, 0.3], "goal": [0.8, 0.3], "tag": "fine"},
+            {"start": [0.5, 0.3], "goal": [0.8, 0.3], "tag": "inside"},
+        ],
     )
     out = tmp_path / "out.json"
     main(["plan", "--scene", str(scene), "--json", str(out), "--quiet"])
@@ -275,7 +329,10 @@ def test_a_start_or_goal_in_collision_is_reported(tmp_path: Path, capsys: pytest
 
 def test_checkpoint_with_a_planner_that_takes_none_is_an_error(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["eval", "--planner", "birrt", "--checkpoint", "x.pt", "--episodes", "1", "--quiet"]) == 2
-    assert "--checkpoint is for --planner policy, hybrid, mpnet-nr, mpnet-hr or a learned-sampling planner" in capsys.readouterr().err
+    assert (
+        "--checkpoint is for --planner policy, hybrid, mpnet-nr, mpnet-hr or a learned-sampling planner"
+        in capsys.readouterr().err
+    )
 
 
 def test_eval_json_names_the_planner(tmp_path: Path) -> None:
@@ -284,7 +341,9 @@ def test_eval_json_names_the_planner(tmp_path: Path) -> None:
     assert json.loads(out.read_text())["planner"] == "straight"
 
 
-def test_plan_draws_every_problem(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_plan_draws_every_problem(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     import pointplan.viz.plot2d as plot2d
 
     drawn: list[int] = []
@@ -305,11 +364,16 @@ def test_render_draws_the_points_the_policy_sees(tmp_path: Path, monkeypatch: py
     save_checkpoint(tmp_path / "p32.pt", data)
     seen: dict[str, object] = {}
     monkeypatch.setattr(plot2d, "render_problem", lambda *a, **k: seen.update(k))
-    assert main(["render", "--planner", "policy", "--checkpoint", str(tmp_path / "p32.pt"), "-o", str(tmp_path / "r.png")]) == 0
+    assert (
+        main(["render", "--planner", "policy", "--checkpoint", str(tmp_path / "p32.pt"), "-o", str(tmp_path / "r.png")])
+        == 0
+    )
     assert seen["n_points"] == 32 and seen["observer_name"] == "surface-normals"
 
 
-def test_train_and_bc_print_one_line_and_write_json_on_request(tmp_path: Path, captured_train: dict[str, object], capsys: pytest.CaptureFixture[str]) -> None:
+def test_train_and_bc_print_one_line_and_write_json_on_request(
+    tmp_path: Path, captured_train: dict[str, object], capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "t.json"
     assert main(["train", "--quiet", "--steps", "300", "--json", str(out)]) == 0
     lines = [x for x in capsys.readouterr().out.splitlines() if not x.startswith("wrote")]
@@ -317,7 +381,16 @@ def test_train_and_bc_print_one_line_and_write_json_on_request(tmp_path: Path, c
     assert json.loads(out.read_text())["steps"] == 300
     from pointplan.cli import _bc_line
 
-    line = _bc_line({"checkpoint": "r/bc.pt", "demo_steps": 10, "demo_problems": 2, "demo_time_s": 1.0, "train_time_s": 2.0, "final_loss": 0.5})
+    line = _bc_line(
+        {
+            "checkpoint": "r/bc.pt",
+            "demo_steps": 10,
+            "demo_problems": 2,
+            "demo_time_s": 1.0,
+            "train_time_s": 2.0,
+            "final_loss": 0.5,
+        }
+    )
     assert "\n" not in line and "r/bc.pt" in line
 
 
@@ -340,21 +413,51 @@ def test_subcommands_have_descriptions_and_options_have_help(capsys: pytest.Capt
     assert "shipped policy" in " ".join(capsys.readouterr().out.split())
 
 
-def test_bc_options_come_from_the_config_dataclasses(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_bc_options_come_from_the_config_dataclasses(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     import pointplan.learning.bc as bc_mod
     import pointplan.learning.dagger as dagger_mod
 
     seen: dict[str, object] = {}
     summary = {"run_dir": "r", "best_success": 0.5, "demo_steps": 3, "wall_time_s": 1.0}
-    monkeypatch.setattr(dagger_mod, "train_dagger", lambda cfg, run_dir, **kw: seen.update(cfg=cfg, run_dir=run_dir) or summary)
+    monkeypatch.setattr(
+        dagger_mod, "train_dagger", lambda cfg, run_dir, **kw: seen.update(cfg=cfg, run_dir=run_dir) or summary
+    )
     monkeypatch.setattr(
         bc_mod,
         "train_bc",
         lambda cfg, run_dir, **kw: (
-            seen.update(bc=cfg) or {**summary, "checkpoint": "r/bc.pt", "demo_problems": 1, "demo_time_s": 0.0, "train_time_s": 0.0, "final_loss": 0.1}
+            seen.update(bc=cfg)
+            or {
+                **summary,
+                "checkpoint": "r/bc.pt",
+                "demo_problems": 1,
+                "demo_time_s": 0.0,
+                "train_time_s": 0.0,
+                "final_loss": 0.1,
+            }
         ),
     )
-    assert main(["bc", "--quiet", "--problems", "5", "--epochs", "2", "--rollouts", "7", "--dagger-rounds", "1", "--expert-max-nodes", "99"]) == 0
+    assert (
+        main(
+            [
+                "bc",
+                "--quiet",
+                "--problems",
+                "5",
+                "--epochs",
+                "2",
+                "--rollouts",
+                "7",
+                "--dagger-rounds",
+                "1",
+                "--expert-max-nodes",
+                "99",
+            ]
+        )
+        == 0
+    )
     cfg = seen["cfg"]
     assert (cfg.bc.n_problems, cfg.bc.epochs, cfg.rollouts, cfg.rounds, cfg.max_nodes) == (5, 2, 7, 1, 99)  # type: ignore[attr-defined]
     assert main(["bc", "--quiet", "--lr", "0.01"]) == 0
@@ -388,7 +491,19 @@ def test_eval_escape_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     runs = {}
     for k in (0, 10):
         out = tmp_path / f"esc{k}.json"
-        args = ["eval", "--env", "boxes3d", "--robot", "sshape", "--observation", "local", "--planner", "policy", "--episodes", "8"]
+        args = [
+            "eval",
+            "--env",
+            "boxes3d",
+            "--robot",
+            "sshape",
+            "--observation",
+            "local",
+            "--planner",
+            "policy",
+            "--episodes",
+            "8",
+        ]
         assert main([*args, "--escape", str(k), "--json", str(out), "--quiet"]) == 0
         runs[k] = json.loads(out.read_text())
     assert runs[10]["success_rate"] >= runs[0]["success_rate"]
@@ -402,11 +517,16 @@ def test_eval_escape_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
 def test_eval_attempts_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``--attempts`` reaches the policy planner; other planners and bad noise are refused."""
     out = tmp_path / "m.json"
-    assert main(["eval", "--planner", "policy", "--episodes", "10", "--attempts", "3", "--json", str(out), "--quiet"]) == 0
+    assert (
+        main(["eval", "--planner", "policy", "--episodes", "10", "--attempts", "3", "--json", str(out), "--quiet"]) == 0
+    )
     assert json.loads(out.read_text())["success_rate"] >= 0.9
     assert main(["eval", "--planner", "birrt", "--episodes", "2", "--attempts", "2", "--quiet"]) == 2
     assert "--attempts" in capsys.readouterr().err
-    assert main(["eval", "--planner", "policy", "--episodes", "2", "--attempts", "2", "--action-noise", "-1", "--quiet"]) == 2
+    assert (
+        main(["eval", "--planner", "policy", "--episodes", "2", "--attempts", "2", "--action-noise", "-1", "--quiet"])
+        == 2
+    )
     assert "--action-noise" in capsys.readouterr().err
     assert (
         main(
@@ -439,7 +559,42 @@ def test_eval_says_which_shipped_policy_it_runs(tmp_path: Path, capsys: pytest.C
     assert main(["eval", "--env", "slot", "--planner", "policy", "--episodes", "1", "--json", str(out)]) == 0
     text = capsys.readouterr().out
     assert "the shipped policy slot_sshape_local_policy.pt (trained in slot, local observations)" in text
-    assert main(["eval", "--env", "boxes3d", "--robot", "sshape", "--planner", "policy", "--episodes", "1", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                "--env",
+                "boxes3d",
+                "--robot",
+                "sshape",
+                "--planner",
+                "policy",
+                "--episodes",
+                "1",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert "the shipped policy sshape_local_policy.pt (trained in boxes3d" in capsys.readouterr().out
-    assert main(["eval", "--env", "boxes3d", "--robot", "sshape", "--planner", "policy", "--episodes", "1", "--quiet", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                "--env",
+                "boxes3d",
+                "--robot",
+                "sshape",
+                "--planner",
+                "policy",
+                "--episodes",
+                "1",
+                "--quiet",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert "shipped policy" not in capsys.readouterr().out

@@ -44,7 +44,9 @@ def test_tree_query_2d_and_batch_shapes() -> None:
     h = rng.uniform(0.001, 0.08, (4, 50, 2))
     got = boxes_contain_cloud_points(cKDTree(pts), c, rot, h)
     assert got.shape == (4, 50)
-    np.testing.assert_array_equal(got.reshape(-1), _brute(pts, c.reshape(-1, 2), rot.reshape(-1, 2, 2), h.reshape(-1, 2)))
+    np.testing.assert_array_equal(
+        got.reshape(-1), _brute(pts, c.reshape(-1, 2), rot.reshape(-1, 2, 2), h.reshape(-1, 2))
+    )
 
 
 def test_sub_boxes_cover_their_box() -> None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from pointplan.cli import main
 from pointplan.geometry.shapes import Box
@@ -119,11 +118,22 @@ def test_uniform_samples_keep_the_natural_collision_share(scenario) -> None:  # 
         CollisionConfig(sampling="grid")
 
 
+@pytest.mark.usefixtures("one_torch_thread")
 def test_patience_stops_and_the_test_reports_both_samplings(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """With patience 1 and a step size too large to learn, training stops two epochs after
     its best; the test carries the stratified accuracy and ``accuracy_uniform``."""
-    torch.set_num_threads(1)
-    cfg = CollisionConfig(n_points=16, train_scenes=4, val_scenes=2, test_scenes=2, per_scene=16, epochs=30, patience=1, width=8, lr=5.0, lr_end=1.0)
+    cfg = CollisionConfig(
+        n_points=16,
+        train_scenes=4,
+        val_scenes=2,
+        test_scenes=2,
+        per_scene=16,
+        epochs=30,
+        patience=1,
+        width=8,
+        lr=5.0,
+        lr_end=1.0,
+    )
     res = train_classifier(cfg, tmp_path, progress=False)
     assert not res.interrupted
     assert len(res.history) == res.best_epoch + 1 < 30
@@ -133,16 +143,33 @@ def test_patience_stops_and_the_test_reports_both_samplings(tmp_path) -> None:  
 
 def test_splits_use_disjoint_workspaces() -> None:
     data = make_data(CollisionConfig(train_scenes=3, val_scenes=2, test_scenes=2, per_scene=8))
-    walls = {k: {tuple(np.round(np.concatenate([o.center for o in sc.obstacles]), 9)) for sc in v.scenes} for k, v in data.items()}
-    assert not (walls["train"] & walls["test"]) and not (walls["train"] & walls["val"]) and not (walls["val"] & walls["test"])
+    walls = {
+        k: {tuple(np.round(np.concatenate([o.center for o in sc.obstacles]), 9)) for sc in v.scenes}
+        for k, v in data.items()
+    }
+    assert (
+        not (walls["train"] & walls["test"])
+        and not (walls["train"] & walls["val"])
+        and not (walls["val"] & walls["test"])
+    )
 
 
+@pytest.mark.usefixtures("one_torch_thread")
 def test_a_small_classifier_beats_chance(tmp_path) -> None:  # type: ignore[no-untyped-def]
     """A few seconds of training: clearly above chance (0.5 on balanced classes; 0.6 on 320
     test samples is 3.5 standard deviations above it), and well above it away from the
     boundary, the easy half."""
-    torch.set_num_threads(1)
-    cfg = CollisionConfig(observation="surface-normals", n_points=64, train_scenes=40, val_scenes=5, test_scenes=10, per_scene=32, epochs=15, width=32, lr=3e-3)
+    cfg = CollisionConfig(
+        observation="surface-normals",
+        n_points=64,
+        train_scenes=40,
+        val_scenes=5,
+        test_scenes=10,
+        per_scene=32,
+        epochs=15,
+        width=32,
+        lr=3e-3,
+    )
     res = train_classifier(cfg, tmp_path, progress=False)
     assert res.test["n"] == 320 and res.test["n_near"] == 160
     assert res.test["accuracy"] > 0.6, res.test

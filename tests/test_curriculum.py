@@ -95,8 +95,19 @@ def test_episode_source_without_retries_leaves_the_rng_alone() -> None:
 
 @pytest.mark.slow
 def test_training_with_retries_logs_the_pool(tmp_path: Path) -> None:
-    small = NetConfig(EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True)
-    cfg = TrainConfig(num_envs=8, total_steps=1_600, warmup_steps=400, eval_every=800, eval_episodes=10, retry_failures=0.5, mine_episodes=20, net=small)
+    small = NetConfig(
+        EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True
+    )
+    cfg = TrainConfig(
+        num_envs=8,
+        total_steps=1_600,
+        warmup_steps=400,
+        eval_every=800,
+        eval_episodes=10,
+        retry_failures=0.5,
+        mine_episodes=20,
+        net=small,
+    )
     res = train(cfg, tmp_path, progress=False)
     last = res.history[-1]
     # an untrained policy fails most problems: the pool fills and about half the episodes retry

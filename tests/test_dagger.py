@@ -19,7 +19,9 @@ from pointplan.scenes.scenarios import Narrow2DScenario, make_scenario
 
 pytestmark = pytest.mark.slow  # behavioural cloning and DAgger train networks
 
-SMALL = NetConfig(EncoderConfig(width=16, layers=2), head_width=16, head_layers=2, critic_action="pooled", shared_encoder=True)
+SMALL = NetConfig(
+    EncoderConfig(width=16, layers=2), head_width=16, head_layers=2, critic_action="pooled", shared_encoder=True
+)
 
 
 def test_parallel_demos_equal_serial_ones_and_survive_a_file(tmp_path: Path) -> None:
@@ -31,7 +33,11 @@ def test_parallel_demos_equal_serial_ones_and_survive_a_file(tmp_path: Path) -> 
         assert np.array_equal(a, b)
     save_demos(tmp_path / "d.npz", scenario, serial, "train", 3)
     back = load_demos(tmp_path / "d.npz", scenario)
-    assert np.array_equal(back.q, serial.q) and np.array_equal(back.action, serial.action) and np.array_equal(back.scene, serial.scene)
+    assert (
+        np.array_equal(back.q, serial.q)
+        and np.array_equal(back.action, serial.action)
+        and np.array_equal(back.scene, serial.scene)
+    )
     # every demonstration step is one action of the robot, along a Bi-RRT path to the goal
     assert np.all(np.abs(serial.action) <= 1 + 1e-9)
     for (_, path), p in zip(serial.paths, serial.problems):
@@ -81,8 +87,19 @@ def test_dagger_with_the_slot_threading_expert_plans_its_own_demos_and_labels(tm
     from pointplan.scenes.scenarios import make_scenario
     from pointplan.scenes.scene import Problem
 
-    bc = BCConfig(env="slot", robot="sshape", observation="global", n_points=32, n_problems=3, epochs=1, net=SMALL, refresh_every=0)
-    cfg = DaggerConfig(bc, rounds=1, rollouts=2, labels_per_failure=2, epochs_per_round=1, eval_episodes=2, expert=expert)
+    bc = BCConfig(
+        env="slot",
+        robot="sshape",
+        observation="global",
+        n_points=32,
+        n_problems=3,
+        epochs=1,
+        net=SMALL,
+        refresh_every=0,
+    )
+    cfg = DaggerConfig(
+        bc, rounds=1, rollouts=2, labels_per_failure=2, epochs_per_round=1, eval_episodes=2, expert=expert
+    )
     train_dagger(cfg, tmp_path, progress=False)
     sc = make_scenario("slot", robot="sshape")
     demos = load_demos(tmp_path / "demos.npz", sc)

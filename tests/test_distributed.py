@@ -123,8 +123,19 @@ def test_training_with_rollout_workers(ray_local: object, tmp_path: Path) -> Non
     from pointplan.models.actor_critic import NetConfig
     from pointplan.models.encoders import EncoderConfig
 
-    net = NetConfig(EncoderConfig(width=16, layers=2), head_width=16, head_layers=2, critic_action="pooled", shared_encoder=True)
-    cfg = TrainConfig(env="empty2d", total_steps=600, num_envs=4, warmup_steps=200, eval_every=300, eval_episodes=10, updates_per_step=0.05, net=net)
+    net = NetConfig(
+        EncoderConfig(width=16, layers=2), head_width=16, head_layers=2, critic_action="pooled", shared_encoder=True
+    )
+    cfg = TrainConfig(
+        env="empty2d",
+        total_steps=600,
+        num_envs=4,
+        warmup_steps=200,
+        eval_every=300,
+        eval_episodes=10,
+        updates_per_step=0.05,
+        net=net,
+    )
     res = train(cfg, tmp_path / "run", progress=False, workers=2, sync_every=2)
     assert res.steps >= 600 and not res.interrupted
     assert (tmp_path / "run" / "last.pt").exists() and len(res.history) == 2
@@ -133,7 +144,9 @@ def test_training_with_rollout_workers(ray_local: object, tmp_path: Path) -> Non
     assert 0 < res.history[-1]["updates"] <= 0.05 * (res.steps - 200) + 1
 
 
-def test_without_ray_workers_say_how_to_install_it(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_without_ray_workers_say_how_to_install_it(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     import pointplan.distributed as dist
 
     monkeypatch.setattr(dist, "ray_available", lambda: False)
@@ -149,18 +162,28 @@ def test_a_rollout_worker_that_dies_is_replaced(ray_local: object) -> None:
     from pointplan.models.actor_critic import NetConfig
     from pointplan.models.encoders import EncoderConfig
 
-    net = NetConfig(EncoderConfig(width=8, layers=1), head_width=8, head_layers=1, critic_action="pooled", shared_encoder=True)
+    net = NetConfig(
+        EncoderConfig(width=8, layers=1), head_width=8, head_layers=1, critic_action="pooled", shared_encoder=True
+    )
     cfg = TrainConfig(env="empty2d", num_envs=2, net=net)
     rollouts = RayRollouts(cfg, workers=1, address=None, steps_per_call=60)
     try:
         from pointplan.envs.core import EnvConfig
 
         scenario = make_scenario("empty2d")
-        agent = SAC(scenario.robot, EnvConfig(observation=cfg.observation, n_points=cfg.n_points), (cfg.n_points, 4), net, cfg.sac)
+        agent = SAC(
+            scenario.robot,
+            EnvConfig(observation=cfg.observation, n_points=cfg.n_points),
+            (cfg.n_points, 4),
+            net,
+            cfg.sac,
+        )
         rollouts.sync(agent.actor, 0)
         episodes, success, steps = rollouts.next_chunk(random_actions=False)
         # 2 environments, 60 steps each: every one ended an episode (the horizon is 50)
-        assert steps == 120 and len(episodes) >= 2 and all(len(e) == 8 and len(e[0]) == len(e[2]) <= 50 for e in episodes)
+        assert (
+            steps == 120 and len(episodes) >= 2 and all(len(e) == 8 and len(e[0]) == len(e[2]) <= 50 for e in episodes)
+        )
         ray.kill(rollouts.workers[0])  # (its next chunk was already asked for)
         total = sum(rollouts.next_chunk(random_actions=True)[2] for _ in range(2))
         assert total == 240 and rollouts.replaced == 1

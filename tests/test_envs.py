@@ -30,7 +30,7 @@ def test_settings_are_keyword_arguments() -> None:
     env = gym.make("pointplan/Narrow2D-v0", observation="surface", n_points=32, horizon=7)
     obs, _ = env.reset(seed=0)
     assert obs["observation"].shape == (32, 2)
-    for t in range(7):
+    for _ in range(7):
         _, _, term, trunc, _ = env.step(np.zeros(2, np.float32))
     assert trunc and not term
 
@@ -175,7 +175,7 @@ def test_vector_env_autoresets() -> None:
     venv = gym.make_vec("pointplan/Narrow2D-v0", num_envs=3, vectorization_mode="vector_entry_point", horizon=5)
     obs, _ = venv.reset(seed=0)
     assert obs["observation"].shape == (3, 64, 4)
-    for t in range(5):
+    for _ in range(5):
         obs, r, term, trunc, info = venv.step(np.zeros((3, 2), np.float32))
     assert trunc.all()
     assert "final_obs" in info and info["_final"].all()

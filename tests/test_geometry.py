@@ -316,7 +316,9 @@ def check_spheres(obstacles: list, centers: np.ndarray, radii: np.ndarray) -> in
     # pair by pair: one scene per obstacle, stacked, answers (K, M)
     stacked = CollisionWorld.stack([CollisionWorld.from_shapes([s], dim) for s in obstacles])
     k = len(obstacles)
-    got = stacked.spheres_collide(np.broadcast_to(centers, (k,) + centers.shape), np.broadcast_to(radii, (k, len(radii))))
+    got = stacked.spheres_collide(
+        np.broadcast_to(centers, (k,) + centers.shape), np.broadcast_to(radii, (k, len(radii)))
+    )
     for kk in range(k):
         bad = np.flatnonzero(keep & (got[kk] != expect[:, kk]))
         assert not len(bad), f"{obstacles[kk]} vs sphere {centers[bad[0]]} r={radii[bad[0]]}: coal {expect[bad[0], kk]}"
@@ -372,7 +374,9 @@ def test_oracle_cases_are_mixed() -> None:
     """The random cases above are not all hits or all misses."""
     rng = np.random.default_rng(0)
     for kind in ["box", "sphere", "capsule", "cylinder", "cone"]:
-        hits = check_spheres(random_obstacles(rng, kind, 3, 4), rng.uniform(-0.8, 0.8, (200, 3)), rng.uniform(0.005, 0.25, 200))
+        hits = check_spheres(
+            random_obstacles(rng, kind, 3, 4), rng.uniform(-0.8, 0.8, (200, 3)), rng.uniform(0.005, 0.25, 200)
+        )
         assert 20 < hits < 180, (kind, hits)
 
 
@@ -411,7 +415,10 @@ def sshape_coal_parts(robot: SShape, q: np.ndarray) -> list[tuple[object, coal.T
     """The five bars as coal boxes, posed from the configuration independently of
     ``world_parts``."""
     r = lie.quat_to_matrix(q[3:])
-    return [(coal.Box(*(2 * h)), tf(r @ br, r @ c + q[:3])) for c, br, h in zip(robot.parts.box_centers, robot.parts.box_rotations, robot.parts.box_halfs)]
+    return [
+        (coal.Box(*(2 * h)), tf(r @ br, r @ c + q[:3]))
+        for c, br, h in zip(robot.parts.box_centers, robot.parts.box_rotations, robot.parts.box_halfs)
+    ]
 
 
 @pytest.mark.parametrize("kind", ["box", "sphere", "capsule", "cylinder", "cone"])
@@ -527,7 +534,9 @@ def test_mesh_box_matches_box(seed: int) -> None:
     for b in boxes:
         g, t = coal_obstacle(b)
         for m in range(60):
-            d = coal.distance(coal.Sphere(1e-9), tf(np.eye(3), c[m]), g, t, coal.DistanceRequest(), coal.DistanceResult())
+            d = coal.distance(
+                coal.Sphere(1e-9), tf(np.eye(3), c[m]), g, t, coal.DistanceRequest(), coal.DistanceResult()
+            )
             margin[m] = min(margin[m], abs(d - r[m]))
     keep = margin > 1e-3
     want = box_world.spheres_collide(c, r)

@@ -18,7 +18,10 @@ def test_slerp_pose_ends_and_rate() -> None:
     rng = np.random.default_rng(0)
     robot = make_robot("sshape")
     for _ in range(20):
-        q0, q1 = (np.concatenate([rng.uniform(0, 1, 3), lie.matrix_to_quat(lie.random_rotations(rng, 1))[0]]) for _ in range(2))
+        q0, q1 = (
+            np.concatenate([rng.uniform(0, 1, 3), lie.matrix_to_quat(lie.random_rotations(rng, 1))[0]])
+            for _ in range(2)
+        )
         r0, r1 = robot.rotations(q0), robot.rotations(q1)
         np.testing.assert_allclose(robot.rotations(slerp_pose(q0, q1, 0.0)), r0, atol=1e-12)
         np.testing.assert_allclose(robot.rotations(slerp_pose(q0, q1, 1.0)), r1, atol=1e-9)

@@ -77,7 +77,9 @@ def imports_of(module: str, source: str, is_package: bool, modules: Iterable[str
     every import statement wherever it is, plus the packages an import loads on the way."""
     modules = set(modules)
     package = module if is_package else module.rpartition(".")[0]
-    ancestors = {".".join(module.split(".")[:i]) for i in range(1, module.count(".") + 1)} | ({module} if is_package else set())
+    ancestors = {".".join(module.split(".")[:i]) for i in range(1, module.count(".") + 1)} | (
+        {module} if is_package else set()
+    )
     found: list[tuple[str, int]] = []
 
     def add(name: str, line: int) -> None:
@@ -97,10 +99,7 @@ def imports_of(module: str, source: str, is_package: bool, modules: Iterable[str
                 if alias.name.split(".")[0] == TOP:
                     add(alias.name, node.lineno)
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")[: len(package.split(".")) - node.level + 1]
-            else:
-                base = []
+            base = package.split(".")[: len(package.split(".")) - node.level + 1] if node.level else []
             target = ".".join(base + (node.module.split(".") if node.module else []))
             if target.split(".")[0] != TOP:
                 continue
@@ -226,7 +225,9 @@ def layer_graph(graph: Graph) -> dict[str, dict[str, str]]:
 def test_every_top_level_name_has_a_layer() -> None:
     names = {layer_of(m) for m in _module_files()}
     assert len(LAYERS) == len(RANK), "a name is on two layers"
-    assert names == set(LAYERS), f"without a layer: {sorted(names - set(LAYERS))}; layers of nothing: {sorted(set(LAYERS) - names)}"
+    assert names == set(LAYERS), (
+        f"without a layer: {sorted(names - set(LAYERS))}; layers of nothing: {sorted(set(LAYERS) - names)}"
+    )
 
 
 def test_no_module_imports_from_a_layer_above() -> None:
@@ -281,7 +282,10 @@ def f():
         ("pointplan.b.z", 13),
     ]
     # in a package's __init__, ``.`` is the package itself
-    assert imports_of("pointplan.a", "from .x import f\nfrom . import y\n", True, MODULES) == [("pointplan.a.x", 1), ("pointplan.a.y", 2)]
+    assert imports_of("pointplan.a", "from .x import f\nfrom . import y\n", True, MODULES) == [
+        ("pointplan.a.x", 1),
+        ("pointplan.a.y", 2),
+    ]
 
 
 def test_the_checks_see_an_upward_import_and_cycles() -> None:
@@ -295,5 +299,7 @@ def test_the_checks_see_an_upward_import_and_cycles() -> None:
     assert cycle.startswith("pointplan.a.x:3 -> pointplan.b.z:7 -> pointplan.a.y:9 -> pointplan.a.x ")
     assert strongly_connected(layer_graph(graph)) == [["a", "b"]]
     # two modules of one subpackage importing each other
-    assert strongly_connected({"pointplan.a.x": {"pointplan.a.y": 1}, "pointplan.a.y": {"pointplan.a.x": 2}}) == [["pointplan.a.x", "pointplan.a.y"]]
+    assert strongly_connected({"pointplan.a.x": {"pointplan.a.y": 1}, "pointplan.a.y": {"pointplan.a.x": 2}}) == [
+        ["pointplan.a.x", "pointplan.a.y"]
+    ]
     assert not strongly_connected({"pointplan.a.x": {"pointplan.a.y": 1}, "pointplan.a.y": {}})

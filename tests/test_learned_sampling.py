@@ -3,6 +3,8 @@ network, the planner's paths and the training command."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 import torch
@@ -14,11 +16,12 @@ from pointplan.planners import BiRRT, make_planner
 from pointplan.planners.learned_sampling import LearnedSampler, LearnedSamplingPlanner, shipped_sampler
 from pointplan.robots import Disc2D
 from pointplan.scenes.scenarios import Narrow2DScenario
+from pointplan.scenes.scene import Problem
 
 
 @pytest.fixture(scope="module")
-def problems() -> list:
-    return Narrow2DScenario().problems("test", 6, seed=0)
+def problems(narrow2d_test_problems: Callable[[int], list[Problem]]) -> list:
+    return narrow2d_test_problems(6)
 
 
 def test_lambda_zero_is_plain_birrt(problems: list) -> None:
@@ -188,4 +191,7 @@ def test_lsample_train_command(tmp_path: object) -> None:
 def test_eval_cli_runs_lsample() -> None:
     from pointplan.cli import main
 
-    assert main(["eval", "--env", "narrow2d", "--planner", "lsample-0.5,lsample-0.9,birrt", "--episodes", "2", "--quiet"]) == 0
+    assert (
+        main(["eval", "--env", "narrow2d", "--planner", "lsample-0.5,lsample-0.9,birrt", "--episodes", "2", "--quiet"])
+        == 0
+    )

@@ -23,7 +23,9 @@ from pointplan.robots import Disc2D
 from pointplan.scenes import Problem
 from pointplan.scenes.scenarios import Narrow2DScenario
 
-SMALL = NetConfig(EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True)
+SMALL = NetConfig(
+    EncoderConfig(width=32, layers=2), head_width=32, head_layers=2, critic_action="pooled", shared_encoder=True
+)
 
 
 def test_pointnet_is_permutation_invariant() -> None:
@@ -51,7 +53,10 @@ def test_cnn_encoder_computes_the_plain_convolutions_and_their_gradients() -> No
     enc = CNNEncoder(size=64, channels=8, extra=3)
     convs = [m for m in enc.net if isinstance(m, torch.nn.Conv2d)]
     assert all(c.weight.is_contiguous(memory_format=torch.channels_last) for c in convs)
-    ref_w = [(c.weight.detach().contiguous().clone().requires_grad_(), c.bias.detach().clone().requires_grad_()) for c in convs]  # type: ignore[union-attr]
+    ref_w = [
+        (c.weight.detach().contiguous().clone().requires_grad_(), c.bias.detach().clone().requires_grad_())  # type: ignore[union-attr]
+        for c in convs
+    ]
 
     def reference(img: torch.Tensor, extra: torch.Tensor) -> torch.Tensor:
         h = img
@@ -90,7 +95,9 @@ def _collect(env: PlanningEnv, buffer: EpisodeReplay, episodes: int, rng: np.ran
     for _ in range(episodes):
         obs, _ = env.reset(seed=int(rng.integers(1 << 30)))
         scene = env.core.scenes[0]
-        recs: dict[str, list] = {k: [] for k in ("obs", "next_obs", "q", "q_next", "goal", "action", "action_norm", "collided")}
+        recs: dict[str, list] = {
+            k: [] for k in ("obs", "next_obs", "q", "q_next", "goal", "action", "action_norm", "collided")
+        }
         done = False
         while not done:
             q = env.core.q[0].copy()
@@ -127,7 +134,10 @@ def test_relabelled_reward_equals_env_reward(action_cost: float) -> None:
         assert not np.allclose(reward, batch_rewards(robot, EnvConfig(), b)[0])
     assert success.any()  # some relabelled goals are reached by their own transition
     episode_of = buf.episode[: len(buf)]
-    idx = [int(np.flatnonzero((buf.q[: len(buf)] == b.q[i]).all(1) & (buf.action[: len(buf)] == b.action[i]).all(1))[0]) for i in range(len(b.q))]
+    idx = [
+        int(np.flatnonzero((buf.q[: len(buf)] == b.q[i]).all(1) & (buf.action[: len(buf)] == b.action[i]).all(1))[0])
+        for i in range(len(b.q))
+    ]
     for i in range(len(b.q)):
         # replay the stored transition in a fresh env aiming at the relabelled goal
         env.reset(seed=0, options={"problem": Problem(scenes[int(episode_of[idx[i]])], b.q[i], b.goal[i])})
@@ -241,7 +251,14 @@ def test_policy_average_is_an_exponential_average_of_the_actor(tmp_path: Path) -
     assert plain.actor_avg is None and plain.policy_actor is plain.actor
 
     cfg = TrainConfig(
-        env="empty2d", num_envs=4, total_steps=400, warmup_steps=100, eval_every=400, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32, policy_avg=0.01)
+        env="empty2d",
+        num_envs=4,
+        total_steps=400,
+        warmup_steps=100,
+        eval_every=400,
+        eval_episodes=5,
+        net=SMALL,
+        sac=SACConfig(batch_size=32, policy_avg=0.01),
     )
     train(cfg, tmp_path / "a", progress=False)
     state = load_checkpoint(tmp_path / "a" / "last.pt")
@@ -263,12 +280,26 @@ def test_the_average_starts_from_the_initial_actor(tmp_path: Path) -> None:
     from pointplan.models.checkpoint import load_checkpoint
 
     own = replace(SMALL, shared_encoder=False)  # a shared encoder would learn from the critics' loss
-    base = TrainConfig(env="empty2d", num_envs=4, total_steps=300, warmup_steps=100, eval_every=300, eval_episodes=5, net=own, sac=SACConfig(batch_size=32))
+    base = TrainConfig(
+        env="empty2d",
+        num_envs=4,
+        total_steps=300,
+        warmup_steps=100,
+        eval_every=300,
+        eval_episodes=5,
+        net=own,
+        sac=SACConfig(batch_size=32),
+    )
     train(base, tmp_path / "a", progress=False)
     init = load_checkpoint(tmp_path / "a" / "last.pt")["actor"]
     # a second run from those weights, with a different seed (other random weights at
     # construction) and the actor frozen (its delay outlasts the run)
-    cfg = replace(base, seed=1, init_actor=str(tmp_path / "a" / "last.pt"), sac=replace(base.sac, policy_avg=0.01, actor_delay=10_000))
+    cfg = replace(
+        base,
+        seed=1,
+        init_actor=str(tmp_path / "a" / "last.pt"),
+        sac=replace(base.sac, policy_avg=0.01, actor_delay=10_000),
+    )
     train(cfg, tmp_path / "b", progress=False)
     agent = load_checkpoint(tmp_path / "b" / "last.pt")["trainer"]["agent"]
     for k, v in init.items():
@@ -322,8 +353,8 @@ def test_shipped_policy_loads_and_solves_fixed_problems() -> None:
     solved = [bool(check_path(scenario.robot, p, r.path)) for p, r in zip(problems, results)]
     assert sum(solved) >= 10, solved
     assert all(r.success == ok for r, ok in zip(results, solved))
-    with pytest.raises(ValueError, match="no policy ships"):
-        make_planner("policy", make_scenario("boxes3d", robot="sshape").robot, observation="local-near")  # none ships for the nearest-hits observation
+    with pytest.raises(ValueError, match="no policy ships"):  # none ships for the nearest-hits observation
+        make_planner("policy", make_scenario("boxes3d", robot="sshape").robot, observation="local-near")
 
 
 def test_metrics_csv_keeps_columns_aligned_when_new_ones_appear(tmp_path: Path) -> None:
@@ -411,7 +442,16 @@ def test_training_with_a_cloning_term(tmp_path: Path) -> None:
     demos = generate_demos(scenario, 10, seed=0, progress=False)
     save_demos(tmp_path / "demos.npz", scenario, demos, "train", 0)
     sac = SACConfig(batch_size=32, bc_weight=1.0)
-    cfg = TrainConfig(env="empty2d", num_envs=4, total_steps=300, warmup_steps=100, eval_every=300, eval_episodes=5, net=SMALL, sac=sac)
+    cfg = TrainConfig(
+        env="empty2d",
+        num_envs=4,
+        total_steps=300,
+        warmup_steps=100,
+        eval_every=300,
+        eval_episodes=5,
+        net=SMALL,
+        sac=sac,
+    )
     with pytest.raises(ValueError, match="--demos"):
         train(cfg, tmp_path / "a", progress=False)
     from dataclasses import replace
@@ -466,7 +506,7 @@ def test_demonstrations_replay_as_the_environment_would_give_them() -> None:
     core = BatchedCore(scenario, 1, env)
     rng = np.random.default_rng(1)
     row = 0
-    for (index, path), (obs, next_obs, q, q_next, goal, action, norm, collided) in zip(demos.paths, episodes):
+    for (_, path), (obs, next_obs, q, q_next, goal, action, norm, collided) in zip(demos.paths, episodes):
         problem = demos.problems[int(demos.scene[row])]
         row += len(path) - 1
         assert obs.shape == (len(q), 32, 4) and next_obs.shape == obs.shape
@@ -500,7 +540,15 @@ def test_training_with_demonstrations_in_the_batches(tmp_path: Path) -> None:
     demos = generate_demos(scenario, 10, seed=0, progress=False)
     save_demos(tmp_path / "demos.npz", scenario, demos, "train", 0)
     cfg = TrainConfig(
-        env="empty2d", num_envs=4, total_steps=300, warmup_steps=100, eval_every=300, eval_episodes=5, net=SMALL, sac=SACConfig(batch_size=32), demo_share=0.25
+        env="empty2d",
+        num_envs=4,
+        total_steps=300,
+        warmup_steps=100,
+        eval_every=300,
+        eval_episodes=5,
+        net=SMALL,
+        sac=SACConfig(batch_size=32),
+        demo_share=0.25,
     )
     with pytest.raises(ValueError, match="--demos"):
         train(cfg, tmp_path / "a", progress=False)
@@ -561,7 +609,13 @@ def test_q_normalisation_makes_the_actor_update_independent_of_the_value_scale()
 
     def actor_after(c: float, normalise: bool) -> list[torch.Tensor]:
         torch.manual_seed(0)
-        sac = SAC(Disc2D(), EnvConfig(), (64, 4), own, SACConfig(batch_size=32, bc_weight=1.0, bc_q_normalise=normalise, init_alpha=1e-12))
+        sac = SAC(
+            Disc2D(),
+            EnvConfig(),
+            (64, 4),
+            own,
+            SACConfig(batch_size=32, bc_weight=1.0, bc_q_normalise=normalise, init_alpha=1e-12),
+        )
         sac.critic = Scaled(c)
         sac.critic_target = Scaled(c)
         sac.critic_opt = torch.optim.Adam(sac.critic.parameters(), lr=1e-3)
@@ -661,11 +715,16 @@ def test_expert_margin_keeps_the_demonstrations_away_from_obstacles() -> None:
             fell_back += 1
         np.testing.assert_allclose(path[0], p.start, atol=1e-9)
     assert kept >= 3
-    dmin_plain = [min(Clearance(robot, scenario.problem("train", k, seed=0).scene.obstacles)(x) for x in densify(robot, q, 0.005)) for k, q in plain.items()]
+    dmin_plain = [
+        min(Clearance(robot, scenario.problem("train", k, seed=0).scene.obstacles)(x) for x in densify(robot, q, 0.005))
+        for k, q in plain.items()
+    ]
     assert min(dmin_plain) < 0.04  # without the margin some path grazes closer than that
 
 
-def test_bc_uses_every_demonstration_of_an_existing_file_and_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_bc_uses_every_demonstration_of_an_existing_file_and_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """``--demos FILE`` that exists is used whole, whatever ``--problems`` says, and the run
     says so when the two differ; the checkpoint records the steps it learnt from."""
     from pointplan.learning.bc import load_demos, save_demos

@@ -20,7 +20,9 @@ def test_compiled_winding_numbers_match_numpy_and_trimesh() -> None:
     points = rng.uniform([-0.08, -0.08, -0.03], [0.08, 0.08, 0.03], (3000, 3))
     from pointplan.geometry._kernels import winding_numbers_compiled
 
-    np.testing.assert_allclose(winding_numbers_compiled(points, mesh.vertices[mesh.faces]), mesh_winding_reference(mesh, points), atol=1e-9)
+    np.testing.assert_allclose(
+        winding_numbers_compiled(points, mesh.vertices[mesh.faces]), mesh_winding_reference(mesh, points), atol=1e-9
+    )
     inside = mesh_contains(mesh, points)
     assert 0.1 < inside.mean() < 0.5  # both classes are well represented
     assert np.array_equal(inside, torus.contains(points))

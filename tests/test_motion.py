@@ -27,7 +27,9 @@ def _random_boxes(rng: np.random.Generator, dim: int, around: np.ndarray, spread
     boxes = []
     for _ in range(k):
         rot = lie.so2_exp(rng.uniform(-np.pi, np.pi)) if dim == 2 else lie.random_rotations(rng, 1)[0]
-        boxes.append(Box(center=around + rng.uniform(-spread, spread, dim), size=rng.uniform(0.02, 0.2, dim), rotation=rot))
+        boxes.append(
+            Box(center=around + rng.uniform(-spread, spread, dim), size=rng.uniform(0.02, 0.2, dim), rotation=rot)
+        )
     return boxes
 
 
@@ -99,11 +101,15 @@ def test_start_closer_than_the_growth_can_still_move_away() -> None:
     scene = Scene([Box(center=[0.5, 0.25], size=[1.0, 0.5])], low=np.zeros(2), high=np.ones(2))
     start = np.array([0.5, 0.5 + robot.radius + 1e-4])
     away = np.array([[0.0, 0.05], [0.03, 0.05]])
-    new_q, collided, checks = q_free(robot, scene.world, np.stack([start, start]), away, np.zeros((2, 2)), np.ones((2, 2)))
+    new_q, collided, checks = q_free(
+        robot, scene.world, np.stack([start, start]), away, np.zeros((2, 2)), np.ones((2, 2))
+    )
     assert not collided.any() and np.all(checks == intervals(np.linalg.norm(away, axis=1), 0.01) + 3)
     np.testing.assert_allclose(new_q, start + away)
     # into the wall: stopped at once
-    new_q, collided, _ = q_free(robot, scene.world, start[None], np.array([[0.0, -0.05]]), np.zeros((1, 2)), np.ones((1, 2)))
+    new_q, collided, _ = q_free(
+        robot, scene.world, start[None], np.array([[0.0, -0.05]]), np.zeros((1, 2)), np.ones((1, 2))
+    )
     assert collided[0] and np.array_equal(new_q[0], start)
 
 
@@ -118,7 +124,9 @@ def test_moving_box_onto_the_start_is_a_collision() -> None:
     world = scene.world_at(5)
     end = q0 + action * robot.action_scale
     assert not robot.collides(world, end)
-    new_q, collided, _ = q_free(robot, world, q0[None], (action * robot.action_scale)[None], scene.low[None], scene.high[None])
+    new_q, collided, _ = q_free(
+        robot, world, q0[None], (action * robot.action_scale)[None], scene.low[None], scene.high[None]
+    )
     assert collided[0]
     np.testing.assert_array_equal(new_q[0], q0)  # it cannot leave through the box
 

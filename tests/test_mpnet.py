@@ -163,7 +163,13 @@ def test_training_smoke(tmp_path: object) -> None:
 
     run = Path(str(tmp_path))
     cfg = MPNetTrainConfig(
-        n_problems=12, val_demo_problems=4, val_problems=3, test_problems=2, epochs=2, eval_every=1, net=MPNetNetConfig(encoder_width=8, width=16, layers=2)
+        n_problems=12,
+        val_demo_problems=4,
+        val_problems=3,
+        test_problems=2,
+        epochs=2,
+        eval_every=1,
+        net=MPNetNetConfig(encoder_width=8, width=16, layers=2),
     )
     res = train_mpnet(cfg, run, progress=False)
     assert (run / "best.pt").is_file() and (run / "metrics.csv").is_file() and (run / "summary.json").is_file()
@@ -178,7 +184,9 @@ def test_training_smoke(tmp_path: object) -> None:
     train_file = run / "train_demos.npz"
     save_demos(train_file, SCENARIO, generate_demos(SCENARIO, 2, progress=False), "train", 0)
     with pytest.raises(ValueError, match="not val"):
-        train_mpnet(replace(cfg, demos_file=str(train_file), val_demos_file=str(train_file)), run / "again", progress=False)
+        train_mpnet(
+            replace(cfg, demos_file=str(train_file), val_demos_file=str(train_file)), run / "again", progress=False
+        )
 
 
 def test_cli_eval_runs_the_shipped_mpnet(tmp_path: object, capsys: pytest.CaptureFixture[str]) -> None:

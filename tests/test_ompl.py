@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import builtins
 import sys
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -16,14 +17,16 @@ from pointplan.scenes.scene import Problem, Scene
 
 
 @pytest.fixture(scope="module")
-def narrow() -> list[Problem]:
-    return Narrow2DScenario().problems("test", 6, seed=0)
+def narrow(narrow2d_test_problems: Callable[[int], list[Problem]]) -> list[Problem]:
+    return narrow2d_test_problems(6)
 
 
 def test_missing_ompl_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
     real_import = builtins.__import__
 
-    def no_ompl(name: str, globals: object = None, locals: object = None, fromlist: object = (), level: int = 0) -> object:
+    def no_ompl(
+        name: str, globals: object = None, locals: object = None, fromlist: object = (), level: int = 0
+    ) -> object:
         if level == 0 and (name == "ompl" or name.startswith("ompl.")):
             raise ImportError("No module named 'ompl'")
         return real_import(name, globals, locals, fromlist, level)  # type: ignore[arg-type]
@@ -35,7 +38,9 @@ def test_missing_ompl_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
         make_planner("ompl:RRTConnect", Narrow2DScenario().robot)
 
 
-def test_cli_without_ompl_says_what_to_install(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_without_ompl_says_what_to_install(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     from pointplan import cli
     from pointplan.planners import ompl as ompl_mod
 
@@ -88,7 +93,9 @@ def test_unknown_planner_name_is_a_clear_error() -> None:
 def test_cli_eval_with_ompl(capsys: pytest.CaptureFixture[str]) -> None:
     from pointplan import cli
 
-    assert cli.main(["eval", "--planner", "ompl:RRTConnect,birrt", "--episodes", "3", "--quiet", "--time-limit", "2"]) == 0
+    assert (
+        cli.main(["eval", "--planner", "ompl:RRTConnect,birrt", "--episodes", "3", "--quiet", "--time-limit", "2"]) == 0
+    )
     out = capsys.readouterr().out
     assert "ompl:RRTConnect" in out and "100.0%" in out
     assert cli.main(["eval", "--planner", "ompl:Nope", "--episodes", "1", "--quiet"]) == 2

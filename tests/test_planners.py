@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -20,14 +21,13 @@ from pointplan.planners import (
 )
 from pointplan.robots import Disc2D, Sphere3D, SShape
 from pointplan.scenes import Problem, Scene
-from pointplan.scenes.scenarios import Narrow2DScenario
 
 N_NARROW = 20
 
 
 @pytest.fixture(scope="module")
-def narrow() -> list[Problem]:
-    return Narrow2DScenario().problems("test", N_NARROW, seed=0)
+def narrow(narrow2d_test_problems: Callable[[int], list[Problem]]) -> list[Problem]:
+    return narrow2d_test_problems(N_NARROW)
 
 
 @pytest.fixture(scope="module")

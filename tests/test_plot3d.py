@@ -66,10 +66,7 @@ def _problem(scene: Scene, robot_name: str) -> tuple[Problem, object, np.ndarray
     robot = make_robot(robot_name)
     rng = np.random.default_rng(1)
     pos = np.stack([np.linspace(-0.4, 0.4, 6), np.linspace(0.4, -0.3, 6), np.linspace(0.3, -0.2, 6)], 1)
-    if robot.config_dim == 7:
-        path = np.concatenate([pos, np.stack([_quat(rng) for _ in pos])], 1)
-    else:
-        path = pos
+    path = np.concatenate([pos, np.stack([_quat(rng) for _ in pos])], 1) if robot.config_dim == 7 else pos
     return Problem(scene, path[0], path[-1], tag=f"test/{robot_name}"), robot, path
 
 

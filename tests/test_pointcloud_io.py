@@ -97,9 +97,9 @@ def test_flat_ply_is_a_2d_cloud(tmp_path: Path) -> None:
 def test_pcd_with_and_without_normals(tmp_path: Path) -> None:
     pypcd4 = pytest.importorskip("pypcd4")
     p, n = box_cloud(2000)
-    pypcd4.PointCloud.from_points(np.c_[p, n].astype(np.float32), ("x", "y", "z", "normal_x", "normal_y", "normal_z"), (np.float32,) * 6).save(
-        tmp_path / "with.pcd"
-    )
+    pypcd4.PointCloud.from_points(
+        np.c_[p, n].astype(np.float32), ("x", "y", "z", "normal_x", "normal_y", "normal_z"), (np.float32,) * 6
+    ).save(tmp_path / "with.pcd")
     pypcd4.PointCloud.from_xyz_points(p.astype(np.float32)).save(tmp_path / "bare.pcd")
     points, normals = read_point_file(tmp_path / "with.pcd")
     np.testing.assert_allclose(points, p, atol=1e-6)
@@ -137,7 +137,9 @@ def test_degenerate_normals_name_the_file(tmp_path: Path, bad: str) -> None:
 def test_all_zero_normals_in_a_ply_are_an_error(tmp_path: Path) -> None:
     p, _ = box_cloud(50)
     ply_with_normals(tmp_path / "flat.ply", p, np.zeros_like(p))
-    with pytest.raises(SceneFormatError, match=r"obstacles\[0\]\.path: points file 'flat.ply': 50 of 50 normals are degenerate"):
+    with pytest.raises(
+        SceneFormatError, match=r"obstacles\[0\]\.path: points file 'flat.ply': 50 of 50 normals are degenerate"
+    ):
         load_scene(write(tmp_path, scene_doc(3, {"type": "points", "path": "flat.ply"})))
 
 
@@ -223,7 +225,8 @@ def test_depth_png_in_a_scene_file(tmp_path: Path) -> None:
     cloud = load_scene(write(tmp_path, doc)).scene.obstacles[0]
     np.testing.assert_allclose(cloud.points[:, 2], 0.5, atol=1e-9)
     assert len(cloud.points) == (depth[::2, ::2] > 0).sum()
-    np.testing.assert_allclose(cloud.normals, np.tile([0.0, 0.0, 1.0], (len(cloud.points), 1)), atol=1e-9)  # towards the camera
+    # towards the camera
+    np.testing.assert_allclose(cloud.normals, np.tile([0.0, 0.0, 1.0], (len(cloud.points), 1)), atol=1e-9)
     ob["path"] = "depth.png"
     with pytest.raises(SceneFormatError, match="exactly one of 'path'"):
         load_scene(write(tmp_path, doc))
@@ -258,7 +261,10 @@ def test_the_example_cloud_has_no_normals_and_the_policy_solves_it(tmp_path: Pat
     points, normals = read_point_file(ply)
     assert normals is None
     out, png = tmp_path / "plan.json", tmp_path / "plan.png"
-    assert main(["plan", "--scene", str(EXAMPLE), "--planner", "policy", "--json", str(out), "-o", str(png), "--quiet"]) == 0
+    assert (
+        main(["plan", "--scene", str(EXAMPLE), "--planner", "policy", "--json", str(out), "-o", str(png), "--quiet"])
+        == 0
+    )
     result = json.loads(out.read_text())
     assert result["metrics"]["success_rate"] == 1.0
     sf = load_scene(EXAMPLE)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
@@ -15,8 +17,8 @@ from pointplan.scenes.scene import Problem
 
 
 @pytest.fixture(scope="module")
-def problems() -> list[Problem]:
-    return Narrow2DScenario().problems("test", 20, seed=0)
+def problems(narrow2d_test_problems: Callable[[int], list[Problem]]) -> list[Problem]:
+    return narrow2d_test_problems(20)
 
 
 def _boxes(problem: Problem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -81,7 +83,9 @@ def test_compiled_action_matches_the_numpy_actor(problems: list[Problem]) -> Non
             q = rng.uniform(p.scene.low, p.scene.high)
             u = rng.random(obs_.draws_one())
             ref = planner.engine._act(obs_.observe_one(q, u=u), q, p.goal, None)  # numpy actor on the built observation
-            got = K.pointnet_action(q, p.goal, u, obs_.n_points, pts, nrm, float(np.float32(0.07)), wflat, layout, scale, 2)
+            got = K.pointnet_action(
+                q, p.goal, u, obs_.n_points, pts, nrm, float(np.float32(0.07)), wflat, layout, scale, 2
+            )
             worst = max(worst, float(np.abs(got - ref).max()))
     assert worst < 1e-5
 
@@ -116,8 +120,14 @@ def test_compiled_plan_keeps_no_state_between_problems(problems: list[Problem]) 
     again = [planner.plan(p) for p in reversed(problems[:6])][::-1]
     for prob, a, b in zip(problems[:6], first, again, strict=True):
         assert "compiled" in a.info["time_split"]
-        assert np.array_equal(a.path, b.path) and (a.success, a.nodes, a.collision_checks) == (b.success, b.nodes, b.collision_checks)
-        assert {k: v for k, v in a.info.items() if k != "time_split"} == {k: v for k, v in b.info.items() if k != "time_split"}
+        assert np.array_equal(a.path, b.path) and (a.success, a.nodes, a.collision_checks) == (
+            b.success,
+            b.nodes,
+            b.collision_checks,
+        )
+        assert {k: v for k, v in a.info.items() if k != "time_split"} == {
+            k: v for k, v in b.info.items() if k != "time_split"
+        }
         if a.info["end"] == "goal":
             assert np.array_equal(a.path[-1], prob.goal)
     p = problems[0]
@@ -134,7 +144,11 @@ def test_compiled_rollout_hands_an_escape_over_to_the_numpy_one() -> None:
     from pointplan.planners.rollout_compiled import END_NAMES
     from pointplan.scenes.scenarios import make_scenario
 
-    assert END_NAMES[K.END_ESCAPE] == "escape" and END_NAMES[K.END_GREEDY] == "goal" and END_NAMES[K.END_STALLED] == "stalled"
+    assert (
+        END_NAMES[K.END_ESCAPE] == "escape"
+        and END_NAMES[K.END_GREEDY] == "goal"
+        and END_NAMES[K.END_STALLED] == "stalled"
+    )
     sc = make_scenario("boxes3d", robot="sphere3d")
     ckpt = shipped_checkpoint("sphere3d", "global")
     a = PolicyPlanner(ckpt, robot=sc.robot)
@@ -147,7 +161,8 @@ def test_compiled_rollout_hands_an_escape_over_to_the_numpy_one() -> None:
         assert "compiled" in ra.info["time_split"] and "compiled" not in rb.info["time_split"]
         handed += ra.info["escapes"] > 0
         if (
-            (ra.success, ra.nodes, ra.info["end"], ra.info["escapes"]) == (rb.success, rb.nodes, rb.info["end"], rb.info["escapes"])
+            (ra.success, ra.nodes, ra.info["end"], ra.info["escapes"])
+            == (rb.success, rb.nodes, rb.info["end"], rb.info["escapes"])
             and ra.path.shape == rb.path.shape
             and np.allclose(ra.path, rb.path, atol=1e-5, rtol=0)
         ):

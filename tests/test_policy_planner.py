@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 import torch
@@ -18,8 +20,8 @@ from pointplan.scenes.scene import Problem
 
 
 @pytest.fixture(scope="module")
-def problems() -> list[Problem]:
-    return Narrow2DScenario().problems("test", 30, seed=0)
+def problems(narrow2d_test_problems: Callable[[int], list[Problem]]) -> list[Problem]:
+    return narrow2d_test_problems(30)
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +55,10 @@ def test_observe_one_is_observe_of_one(problems: list[Problem]) -> None:
             assert np.array_equal(a.observe(q[None], ra)[0], b.observe_one(q, rb))
         rb.random(b.draws_one())
         ra.random(b.draws_one())  # keep the streams level
-        assert np.array_equal(a.observe(q[None], np.random.default_rng(9))[0], b.observe_one(q, u=np.random.default_rng(9).random(b.draws_one())))
+        assert np.array_equal(
+            a.observe(q[None], np.random.default_rng(9))[0],
+            b.observe_one(q, u=np.random.default_rng(9).random(b.draws_one())),
+        )
 
 
 def test_plan_is_the_batched_rollout(problems: list[Problem]) -> None:
@@ -168,7 +173,12 @@ def test_one_robot_rollout_in_3d_matches_the_batched_one(robot_name: str) -> Non
     scenario = make_scenario("boxes3d", robot=robot_name)
     robot = scenario.robot
     torch.manual_seed(0)
-    actor = Actor((64, 6), robot.twist_dim, robot.twist_dim, NetConfig(EncoderConfig("pointnet", 32, 2), head_width=32, head_layers=2))
+    actor = Actor(
+        (64, 6),
+        robot.twist_dim,
+        robot.twist_dim,
+        NetConfig(EncoderConfig("pointnet", 32, 2), head_width=32, head_layers=2),
+    )
     policy = Policy(actor, robot, {"observation": "global", "n_points": 64, "horizon": 12})
     planner = PolicyPlanner(policy, greedy_goal=False, escape=0)  # the rollout itself, to its end
     assert planner.fast is not None
@@ -208,7 +218,12 @@ def _weak_sphere_policy(horizon: int = 15):  # type: ignore[no-untyped-def]
     scenario = make_scenario("boxes3d", robot="sphere3d")
     robot = scenario.robot
     torch.manual_seed(1)
-    actor = Actor((64, 6), robot.twist_dim, robot.twist_dim, NetConfig(EncoderConfig("pointnet", 32, 2), head_width=32, head_layers=2))
+    actor = Actor(
+        (64, 6),
+        robot.twist_dim,
+        robot.twist_dim,
+        NetConfig(EncoderConfig("pointnet", 32, 2), head_width=32, head_layers=2),
+    )
     with torch.no_grad():  # a wide spread, so that sampled attempts go places
         actor.head[-1].bias[robot.twist_dim :] = 0.0
     policy = Policy(actor, robot, {"observation": "global", "n_points": 64, "horizon": horizon})
@@ -382,7 +397,8 @@ def test_escape_in_a_moving_scene_and_bad_input() -> None:
     assert type(whole.steps) is int and type(whole.window) is int and whole == Escape(steps=10, window=6)
     sphere = PolicyPlanner(shipped_checkpoint("sphere3d", "local"))
     assert sphere.escape == Escape(steps=10, noise=0.0, still=0.1, window=6, subgoal=True)  # the sphere's default
-    assert PolicyPlanner(shipped_checkpoint("sphere3d", "local"), escape=4).escape == Escape(4, 0.0, 0.1, 6, True)  # its kind, 4 steps
+    # its kind, 4 steps
+    assert PolicyPlanner(shipped_checkpoint("sphere3d", "local"), escape=4).escape == Escape(4, 0.0, 0.1, 6, True)
     disc = PolicyPlanner(shipped_checkpoint("disc2d"))
     assert disc.escape.steps == 0  # off for the disc, where validation showed no change
 
@@ -404,7 +420,9 @@ def test_subgoal_escape_frees_a_dithering_sphere(observation: str) -> None:
     plain = PolicyPlanner(ckpt, robot=robot, escape=0, compiled=False)  # the escape's own (uncompiled) rollout
     # uncompiled too, so the two agree to the last bit (the compiled rollout hands escapes to
     # this one: tests/test_policy_kernels.py)
-    esc = PolicyPlanner(ckpt, robot=robot, escape=Escape(steps=10, noise=0.0, still=0.1, window=6, subgoal=True), compiled=False)
+    esc = PolicyPlanner(
+        ckpt, robot=robot, escape=Escape(steps=10, noise=0.0, still=0.1, window=6, subgoal=True), compiled=False
+    )
     probs = sc.problems("val", 300, seed=0)
     failed = [(p, r) for p, r in ((p, plain.plan(p)) for p in probs) if not r.success]
     assert len(failed) >= 4  # the mean action leaves some problems unsolved

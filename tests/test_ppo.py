@@ -55,10 +55,16 @@ def test_gae_equals_the_sum_of_discounted_td_errors_cut_at_episode_ends() -> Non
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory: pytest.TempPathFactory) -> PPORun:
-    torch.set_num_threads(1)
+def run(tmp_path_factory: pytest.TempPathFactory, one_torch_thread: None) -> PPORun:
     cfg = PPOConfig(
-        init_actor=str(shipped_checkpoint("disc2d")), num_envs=4, rollout_steps=10, minibatch=20, eval_episodes=5, value_warmup=0, lr=3e-4, target_kl=0
+        init_actor=str(shipped_checkpoint("disc2d")),
+        num_envs=4,
+        rollout_steps=10,
+        minibatch=20,
+        eval_episodes=5,
+        value_warmup=0,
+        lr=3e-4,
+        target_kl=0,
     )
     return PPORun(cfg, tmp_path_factory.mktemp("ppo"), None)
 
@@ -95,9 +101,34 @@ def test_ppo_command_runs_saves_and_resumes(tmp_path: Path) -> None:
     from pointplan.cli import main
 
     run_dir = tmp_path / "run"
-    common = ["--num-envs", "4", "--rollout-steps", "10", "--eval-every", "40", "--eval-episodes", "4", "--value-warmup", "1", "--quiet"]
+    common = [
+        "--num-envs",
+        "4",
+        "--rollout-steps",
+        "10",
+        "--eval-every",
+        "40",
+        "--eval-episodes",
+        "4",
+        "--value-warmup",
+        "1",
+        "--quiet",
+    ]
     out = tmp_path / "s.json"
-    code = main(["ppo", "--init-actor", str(shipped_checkpoint("disc2d")), "--steps", "80", "--run-dir", str(run_dir), "--json", str(out), *common])
+    code = main(
+        [
+            "ppo",
+            "--init-actor",
+            str(shipped_checkpoint("disc2d")),
+            "--steps",
+            "80",
+            "--run-dir",
+            str(run_dir),
+            "--json",
+            str(out),
+            *common,
+        ]
+    )
     assert code == 0
     assert json.loads(out.read_text())["steps"] == 80
     last = load_checkpoint(run_dir / "last.pt")
@@ -165,7 +196,11 @@ def test_reverse_curriculum_starts_on_the_demonstrations_near_their_goal(demos_f
         fronts.append(run3.at_frontier[0])
     assert 0.65 < np.mean(fronts) < 0.85  # 1/2 + 1/2 x 1/2
     # with no share, every episode is a fresh problem
-    run2 = PPORun(PPOConfig(init_actor=cfg.init_actor, num_envs=4, eval_episodes=2, start_demos=str(demos_file), start_share=0.0), tmp_path / "b", None)
+    run2 = PPORun(
+        PPOConfig(init_actor=cfg.init_actor, num_envs=4, eval_episodes=2, start_demos=str(demos_file), start_share=0.0),
+        tmp_path / "b",
+        None,
+    )
     assert not run2.from_demo.any()
 
 
@@ -173,19 +208,58 @@ def test_ppo_command_keeps_the_curriculum_across_a_resume(demos_file: Path, tmp_
     from pointplan.cli import main
 
     run_dir = tmp_path / "run"
-    common = ["--num-envs", "4", "--rollout-steps", "10", "--eval-every", "40", "--eval-episodes", "2", "--value-warmup", "1", "--quiet"]
+    common = [
+        "--num-envs",
+        "4",
+        "--rollout-steps",
+        "10",
+        "--eval-every",
+        "40",
+        "--eval-episodes",
+        "2",
+        "--value-warmup",
+        "1",
+        "--quiet",
+    ]
     curriculum = [
         "--start-demos",
         str(demos_file),
-        *"--start-back 3 --start-back-step 2 --start-advance 0.01 --start-min-episodes 1 --start-frontier-share 1".split(),
+        *[
+            "--start-back",
+            "3",
+            "--start-back-step",
+            "2",
+            "--start-advance",
+            "0.01",
+            "--start-min-episodes",
+            "1",
+            "--start-frontier-share",
+            "1",
+        ],
     ]
-    assert main(["ppo", "--init-actor", str(shipped_checkpoint("disc2d")), "--steps", "40", "--run-dir", str(run_dir), *curriculum, *common]) == 0
+    assert (
+        main(
+            [
+                "ppo",
+                "--init-actor",
+                str(shipped_checkpoint("disc2d")),
+                "--steps",
+                "40",
+                "--run-dir",
+                str(run_dir),
+                *curriculum,
+                *common,
+            ]
+        )
+        == 0
+    )
     saved = load_checkpoint(run_dir / "last.pt")
     back = saved["ppo"]["back"]
     assert back > 3  # advanced (a frontier episode that succeeded passes the 1% bar)
     from pointplan.config import from_dict
 
-    assert PPORun(from_dict(PPOConfig, saved["ppo_config"]), run_dir, run_dir / "last.pt").back == back  # restored, not restarted
+    # restored, not restarted
+    assert PPORun(from_dict(PPOConfig, saved["ppo_config"]), run_dir, run_dir / "last.pt").back == back
     header = (run_dir / "metrics.csv").read_text().splitlines()[0].split(",")
     assert "start_back" in header and "demo_start_success" in header
     assert main(["ppo", "--resume", str(run_dir / "last.pt"), "--steps", "80", *common]) == 0
@@ -194,20 +268,35 @@ def test_ppo_command_keeps_the_curriculum_across_a_resume(demos_file: Path, tmp_
     other = tmp_path / "other.npz"
     with np.load(demos_file) as f:
         np.savez(other, **{k: (np.array("boxes3d") if k == "env" else f[k]) for k in f.files})
-    refused = ["ppo", "--init-actor", str(shipped_checkpoint("disc2d")), "--steps", "40", "--run-dir", str(tmp_path / "r2"), "--start-demos", str(other)]
+    refused = [
+        "ppo",
+        "--init-actor",
+        str(shipped_checkpoint("disc2d")),
+        "--steps",
+        "40",
+        "--run-dir",
+        str(tmp_path / "r2"),
+        "--start-demos",
+        str(other),
+    ]
     assert main([*refused, *common]) == 2
 
 
 def test_the_greedy_goal_test_ends_episodes_whose_straight_edge_to_the_goal_is_free(tmp_path: Path) -> None:
     from pointplan.planners.edges import edge_free
 
-    cfg = PPOConfig(init_actor=str(shipped_checkpoint("disc2d")), num_envs=8, rollout_steps=4, eval_episodes=2, greedy_goal=True)
+    cfg = PPOConfig(
+        init_actor=str(shipped_checkpoint("disc2d")), num_envs=8, rollout_steps=4, eval_episodes=2, greedy_goal=True
+    )
     run = PPORun(cfg, tmp_path, None)
     run.core.q[0] = run.core.goal[0]  # at the goal: free for sure
     reward, term, trunc = np.full(8, -0.1), np.zeros(8, bool), np.ones(8, bool)
     term[7] = True  # an episode that already ended is left alone
     r2, t2, tr2 = run.greedy(reward, term, trunc)
-    free = [edge_free(run.robot, s.world, q, g, 0.01, s.low, s.high)[0] for s, q, g in zip(run.core.scenes, run.core.q, run.core.goal)]
+    free = [
+        edge_free(run.robot, s.world, q, g, 0.01, s.low, s.high)[0]
+        for s, q, g in zip(run.core.scenes, run.core.q, run.core.goal)
+    ]
     assert free[0] and not all(free[:7])  # some of the random starts are blocked
     for i in range(7):
         assert t2[i] == free[i] and tr2[i] == (not free[i])

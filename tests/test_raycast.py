@@ -495,7 +495,9 @@ def test_compiled_box_kernel_matches_numpy(monkeypatch: pytest.MonkeyPatch) -> N
     from pointplan.geometry import lie
 
     rng = np.random.default_rng(3)
-    boxes = [Box(rng.uniform(-0.4, 0.4, 3), rng.uniform(0.1, 0.5, 3), lie.random_rotations(rng, 1)[0]) for _ in range(6)]
+    boxes = [
+        Box(rng.uniform(-0.4, 0.4, 3), rng.uniform(0.1, 0.5, 3), lie.random_rotations(rng, 1)[0]) for _ in range(6)
+    ]
     boxes.append(Box([0.0, 0.0, 0.0], [0.2, 0.2, 0.2]))
     world = CollisionWorld.from_shapes(boxes, 3)
     o = rng.uniform(-0.6, 0.6, (400, 3))
@@ -552,6 +554,7 @@ def test_a_scanned_surface_is_seen_like_the_surface() -> None:
     both = hb.hit & hc.hit
     assert both.sum() >= hb.hit.sum() - 2
     err = hb.distance[both] - hc.distance[both]
-    assert np.percentile(np.abs(err), 99) <= radius * 1.5 and err.min() > -radius  # the splats stand slightly proud of the surface
+    # the splats stand slightly proud of the surface
+    assert np.percentile(np.abs(err), 99) <= radius * 1.5 and err.min() > -radius
     cos = np.sum(hb.normals[both] * hc.normals[both], -1)
     assert np.mean(cos > 0.99) > 0.98

@@ -97,7 +97,9 @@ def test_every_shipped_file_has_one_recipe() -> None:
 
 @pytest.mark.parametrize("smoke", [False, True])
 @pytest.mark.parametrize("name", sorted(RECIPES))
-def test_dry_run_prints_commands_that_parse(name: str, smoke: bool, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_dry_run_prints_commands_that_parse(
+    name: str, smoke: bool, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert recipes.run(name, tmp_path / "r", smoke=smoke, dry_run=True) == 0
     out = capsys.readouterr().out
     lines = [shlex.split(line) for line in out.splitlines() if line and not line.startswith("#")]
@@ -135,7 +137,11 @@ def test_flags_agree_with_the_saved_configurations(name: str) -> None:
             given.update(step)
             last = (argv[1], step)
             for key in ("env", "robot", "observation"):  # (a resumed run keeps its own)
-                if not getattr(args, "resume", None) and getattr(args, key, None) and key in shipped[OPTIONS[argv[1]][1]]:
+                if (
+                    not getattr(args, "resume", None)
+                    and getattr(args, key, None)
+                    and key in shipped[OPTIONS[argv[1]][1]]
+                ):
                     assert shipped[OPTIONS[argv[1]][1]][key] == getattr(args, key), (argv, key)
     assert last is not None
     command, final = last
@@ -157,7 +163,9 @@ def _fake_run(codes: list[int], calls: list[list[str]]) -> Any:
     return run
 
 
-def test_run_stops_at_the_first_failure(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_run_stops_at_the_first_failure(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     steps = tuple(Step(("pointplan", "eval", "--episodes", "{400|1}", "--json", f"{{root}}/{k}.json")) for k in "abc")
     monkeypatch.setitem(RECIPES, "fake", Recipe("fake", "fake.pt", "a test", "three steps", steps, ("b.json",)))
     calls: list[list[str]] = []
@@ -165,7 +173,11 @@ def test_run_stops_at_the_first_failure(monkeypatch: pytest.MonkeyPatch, tmp_pat
     assert recipes.run("fake", tmp_path, smoke=True) == 3
     assert len(calls) == 2 and calls[0][1:4] == ["-m", "pointplan", "eval"] and "1" in calls[0]
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("recipe fake: step 2 of 3 failed with exit code 3") and "--from-step 2" in err[0]
+    assert (
+        len(err) == 1
+        and err[0].startswith("recipe fake: step 2 of 3 failed with exit code 3")
+        and "--from-step 2" in err[0]
+    )
     # continued from step 2; the product (the first of the candidates that exists) is copied
     calls.clear()
     monkeypatch.setattr(recipes.subprocess, "run", _fake_run([0, 0], calls))
@@ -193,7 +205,18 @@ def _smoke(name: str, root: Path) -> Path:
     assert recipes.run(name, root, smoke=True) == 0
     out = root / RECIPES[name].shipped
     built, shipped = load_checkpoint(out), load_checkpoint(DATA / RECIPES[name].shipped)
-    for key in ("kind", "env", "robot", "observation", "n_points", "obs_shape", "net", "cvae", "point_features", "horizon"):
+    for key in (
+        "kind",
+        "env",
+        "robot",
+        "observation",
+        "n_points",
+        "obs_shape",
+        "net",
+        "cvae",
+        "point_features",
+        "horizon",
+    ):
         assert built.get(key) == shipped.get(key), key
     return out
 

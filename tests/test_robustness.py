@@ -38,10 +38,15 @@ def test_variants_connected_reproducible_and_disjoint(name: str) -> None:
         scene = sc.scene("test", i)
         assert narrow2d.free_space_labels(scene, radius)[1] == 1
         again = sc.scene("test", i)
-        assert all(np.allclose(a.center, b.center) and np.allclose(a.size, b.size) for a, b in zip(scene.obstacles, again.obstacles))
+        assert all(
+            np.allclose(a.center, b.center) and np.allclose(a.size, b.size)
+            for a, b in zip(scene.obstacles, again.obstacles)
+        )
         # not the 2D-Narrow workspace of the same index, nor the train workspace
         for other in (narrow2d.workspace("test", i), sc.scene("train", i)):
-            assert len(other.obstacles) != len(scene.obstacles) or not all(np.allclose(a.center, b.center) for a, b in zip(scene.obstacles, other.obstacles))
+            assert len(other.obstacles) != len(scene.obstacles) or not all(
+                np.allclose(a.center, b.center) for a, b in zip(scene.obstacles, other.obstacles)
+            )
     p = sc.problem("test", 0)
     assert not sc.robot.collides(p.scene.world, p.start[None]).any()
 

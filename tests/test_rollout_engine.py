@@ -51,7 +51,15 @@ def test_compiled_stepper_is_chosen_by_capability() -> None:
 
 
 def test_options_are_validated_once() -> None:
-    for bad in ({"attempts": 0}, {"action_noise": -1.0}, {"noise": float("nan")}, {"draws": 0}, {"stall_steps": 0}, {"horizon": 0}, {"escape": -2}):
+    for bad in (
+        {"attempts": 0},
+        {"action_noise": -1.0},
+        {"noise": float("nan")},
+        {"draws": 0},
+        {"stall_steps": 0},
+        {"horizon": 0},
+        {"escape": -2},
+    ):
         with pytest.raises(ValueError):
             RolloutOptions(**bad)  # type: ignore[arg-type]
     with pytest.raises(TypeError, match="unknown options"):

@@ -120,7 +120,19 @@ def test_ctrl_c_in_train(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
 
     monkeypatch.setattr(train_mod, "_learn", learn_then_ctrl_c)
     run = tmp_path / "run"
-    tiny = ["--num-envs", "4", "--eval-episodes", "2", "--warmup-steps", "100", "--batch-size", "16", "--buffer-size", "2000", *SMALL_NET]
+    tiny = [
+        "--num-envs",
+        "4",
+        "--eval-episodes",
+        "2",
+        "--warmup-steps",
+        "100",
+        "--batch-size",
+        "16",
+        "--buffer-size",
+        "2000",
+        *SMALL_NET,
+    ]
     code = main(["train", "--quiet", "--steps", "400", "--eval-every", "400", *tiny, "--run-dir", str(run)])
     resume = _interrupted(capsys, code, run, "trainer")
     assert load_checkpoint(run / "last.pt")["trainer"]["steps"] == 200
@@ -133,8 +145,22 @@ def test_ctrl_c_in_train(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
 def test_ctrl_c_in_ppo(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     _ctrl_c_after_rows(monkeypatch, 2)  # the starting policy's row, then the first validation's
     run = tmp_path / "run"
-    tiny = ["--num-envs", "4", "--rollout-steps", "5", "--eval-every", "20", "--eval-episodes", "2", "--value-warmup", "1", "--quiet"]
-    code = main(["ppo", "--init-actor", str(shipped_checkpoint("disc2d")), "--steps", "60", "--run-dir", str(run), *tiny])
+    tiny = [
+        "--num-envs",
+        "4",
+        "--rollout-steps",
+        "5",
+        "--eval-every",
+        "20",
+        "--eval-episodes",
+        "2",
+        "--value-warmup",
+        "1",
+        "--quiet",
+    ]
+    code = main(
+        ["ppo", "--init-actor", str(shipped_checkpoint("disc2d")), "--steps", "60", "--run-dir", str(run), *tiny]
+    )
     resume = _interrupted(capsys, code, run, "ppo")
     assert load_checkpoint(run / "last.pt")["ppo"]["steps"] == 20
     monkeypatch.undo()
@@ -145,7 +171,20 @@ def test_ctrl_c_in_ppo(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: 
 def test_ctrl_c_in_bc(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     _ctrl_c_after_rows(monkeypatch, 2, raise_it=True)  # after the second epoch
     run = tmp_path / "run"
-    tiny = ["--problems", "3", "--epochs", "4", "--n-points", "16", "--refresh-every", "0", "--eval-episodes", "3", *SMALL_NET, "--quiet"]
+    tiny = [
+        "--problems",
+        "3",
+        "--epochs",
+        "4",
+        "--n-points",
+        "16",
+        "--refresh-every",
+        "0",
+        "--eval-episodes",
+        "3",
+        *SMALL_NET,
+        "--quiet",
+    ]
     code = main(["bc", *tiny, "--run-dir", str(run)])
     resume = _interrupted(capsys, code, run, "bc_trainer")
     assert load_checkpoint(run / "last.pt")["bc_trainer"]["epochs"] == 2 and not (run / "bc.pt").exists()
@@ -161,7 +200,20 @@ def test_ctrl_c_in_bc(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: p
 def test_ctrl_c_in_dagger(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     _ctrl_c_after_rows(monkeypatch, 1)  # after the first round
     run = tmp_path / "run"
-    tiny = ["--problems", "4", "--epochs", "1", "--rollouts", "3", "--labels-per-failure", "1", "--epochs-per-round", "1", "--eval-episodes", "2"]
+    tiny = [
+        "--problems",
+        "4",
+        "--epochs",
+        "1",
+        "--rollouts",
+        "3",
+        "--labels-per-failure",
+        "1",
+        "--epochs-per-round",
+        "1",
+        "--eval-episodes",
+        "2",
+    ]
     code = main(["bc", *tiny, "--n-points", "16", *SMALL_NET, "--dagger-rounds", "2", "--quiet", "--run-dir", str(run)])
     resume = _interrupted(capsys, code, run, "dagger")
     assert load_checkpoint(run / "last.pt")["dagger"]["round"] == 1
@@ -170,13 +222,42 @@ def test_ctrl_c_in_dagger(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsy
     assert load_checkpoint(run / "last.pt")["dagger"]["round"] == 2
 
 
-def test_ctrl_c_in_mpnet_train(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_ctrl_c_in_mpnet_train(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     from pointplan.models.mpnet import MPNet
 
     _ctrl_c_after_rows(monkeypatch, 1)
     run = tmp_path / "run"
-    tiny = ["--problems", "6", "--val-demo-problems", "2", "--val-problems", "2", "--test-problems", "0", "--epochs", "3", "--eval-every", "1"]
-    code = main(["mpnet-train", *tiny, "--encoder-width", "8", "--width", "16", "--layers", "2", "--quiet", "--run-dir", str(run)])
+    tiny = [
+        "--problems",
+        "6",
+        "--val-demo-problems",
+        "2",
+        "--val-problems",
+        "2",
+        "--test-problems",
+        "0",
+        "--epochs",
+        "3",
+        "--eval-every",
+        "1",
+    ]
+    code = main(
+        [
+            "mpnet-train",
+            *tiny,
+            "--encoder-width",
+            "8",
+            "--width",
+            "16",
+            "--layers",
+            "2",
+            "--quiet",
+            "--run-dir",
+            str(run),
+        ]
+    )
     resume = _interrupted(capsys, code, run, "mpnet_trainer")
     assert load_checkpoint(run / "last.pt")["mpnet_trainer"]["epoch"] == 1
     MPNet.from_checkpoint(run / "last.pt")  # also a network the planner reads
@@ -186,10 +267,26 @@ def test_ctrl_c_in_mpnet_train(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, 
     assert "best validation success" in capsys.readouterr().out
 
 
-def test_ctrl_c_in_lsample_train(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_ctrl_c_in_lsample_train(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     _ctrl_c_after_rows(monkeypatch, 1, raise_it=True)
     run = tmp_path / "run"
-    tiny = ["--problems", "4", "--val-problems", "2", "--plan-problems", "0", "--epochs", "3", "--width", "16", "--point-width", "16", "--quiet"]
+    tiny = [
+        "--problems",
+        "4",
+        "--val-problems",
+        "2",
+        "--plan-problems",
+        "0",
+        "--epochs",
+        "3",
+        "--width",
+        "16",
+        "--point-width",
+        "16",
+        "--quiet",
+    ]
     code = main(["lsample-train", *tiny, "--run-dir", str(run)])
     resume = _interrupted(capsys, code, run, "lsample_trainer")
     assert load_checkpoint(run / "last.pt")["lsample_trainer"]["epoch"] == 1
@@ -198,11 +295,30 @@ def test_ctrl_c_in_lsample_train(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     assert load_checkpoint(run / "last.pt")["lsample_trainer"]["epoch"] == 3 and (run / "best.pt").is_file()
 
 
-def test_ctrl_c_in_collision_classify(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_ctrl_c_in_collision_classify(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     _ctrl_c_after_rows(monkeypatch, 1)
     run = tmp_path / "run"
-    tiny = ["--train-scenes", "3", "--val-scenes", "2", "--test-scenes", "2", "--per-scene", "8", "--epochs", "2", "--width", "16", "--n-points", "16"]
-    code = main(["collision-classify", "--observation", "surface,surface-normals", *tiny, "--quiet", "--run-dir", str(run)])
+    tiny = [
+        "--train-scenes",
+        "3",
+        "--val-scenes",
+        "2",
+        "--test-scenes",
+        "2",
+        "--per-scene",
+        "8",
+        "--epochs",
+        "2",
+        "--width",
+        "16",
+        "--n-points",
+        "16",
+    ]
+    code = main(
+        ["collision-classify", "--observation", "surface,surface-normals", *tiny, "--quiet", "--run-dir", str(run)]
+    )
     resume = _interrupted(capsys, code, run, "collision_trainer")
     state = load_checkpoint(run / "last.pt")["collision_trainer"]
     assert state["epoch"] == 1 and state["queue"] == ["surface-normals"]
@@ -214,8 +330,24 @@ def test_ctrl_c_in_collision_classify(tmp_path: Path, monkeypatch: pytest.Monkey
 @pytest.mark.slow
 def test_a_real_ctrl_c_stops_bc_in_its_loop_without_a_traceback(tmp_path: Path) -> None:
     run = tmp_path / "run"
-    args = ["bc", "--problems", "3", "--epochs", "100000", "--n-points", "16", "--refresh-every", "0", *SMALL_NET, "--quiet", "--run-dir", str(run)]
-    proc = subprocess.Popen([sys.executable, "-m", "pointplan", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    args = [
+        "bc",
+        "--problems",
+        "3",
+        "--epochs",
+        "100000",
+        "--n-points",
+        "16",
+        "--refresh-every",
+        "0",
+        *SMALL_NET,
+        "--quiet",
+        "--run-dir",
+        str(run),
+    ]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pointplan", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     try:
         t0 = time.time()
         while not (run / "metrics.csv").exists() and time.time() - t0 < 120 and proc.poll() is None:
@@ -257,9 +389,20 @@ def test_a_run_dir_that_cannot_be_used_is_one_line_before_any_work(
     def work(*a: object, **k: object) -> None:
         raise AssertionError("work started before --run-dir was checked")
 
-    for mod, name in ((train, "train"), (ppo, "train_ppo"), (bc, "train_bc"), (bc, "generate_demos"), (dagger, "train_dagger")):
+    for mod, name in (
+        (train, "train"),
+        (ppo, "train_ppo"),
+        (bc, "train_bc"),
+        (bc, "generate_demos"),
+        (dagger, "train_dagger"),
+    ):
         monkeypatch.setattr(mod, name, work)
-    for mod, name in ((mpnet, "train_mpnet"), (lsample, "train_lsample"), (collision, "make_data"), (collision, "train_classifier")):
+    for mod, name in (
+        (mpnet, "train_mpnet"),
+        (lsample, "train_lsample"),
+        (collision, "make_data"),
+        (collision, "train_classifier"),
+    ):
         monkeypatch.setattr(mod, name, work)
     (tmp_path / "file").write_text("not a folder")
     run = tmp_path / "file" / "run" if under else tmp_path / "file"
@@ -273,7 +416,9 @@ def _no_sentinels(text: str) -> None:
     assert "-1.000" not in text and not re.search(r"\bnan\b", text, re.IGNORECASE), text
 
 
-def test_train_without_a_validation_says_so(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_train_without_a_validation_says_so(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     import pointplan.learning.train as train_mod
 
     learn = train_mod._learn
@@ -284,9 +429,37 @@ def test_train_without_a_validation_says_so(tmp_path: Path, monkeypatch: pytest.
             signal.raise_signal(signal.SIGINT)
 
     monkeypatch.setattr(train_mod, "_learn", learn_then_ctrl_c)
-    tiny = ["--num-envs", "4", "--eval-episodes", "2", "--warmup-steps", "100", "--batch-size", "16", "--buffer-size", "2000", *SMALL_NET]
+    tiny = [
+        "--num-envs",
+        "4",
+        "--eval-episodes",
+        "2",
+        "--warmup-steps",
+        "100",
+        "--batch-size",
+        "16",
+        "--buffer-size",
+        "2000",
+        *SMALL_NET,
+    ]
     json_path = tmp_path / "s.json"
-    assert main(["train", "--steps", "400", "--eval-every", "400", *tiny, "--run-dir", str(tmp_path / "run"), "--json", str(json_path)]) == 130
+    assert (
+        main(
+            [
+                "train",
+                "--steps",
+                "400",
+                "--eval-every",
+                "400",
+                *tiny,
+                "--run-dir",
+                str(tmp_path / "run"),
+                "--json",
+                str(json_path),
+            ]
+        )
+        == 130
+    )
     out, err = capsys.readouterr()
     _no_sentinels(out + err)
     assert "no validation yet" in err
@@ -295,8 +468,33 @@ def test_train_without_a_validation_says_so(tmp_path: Path, monkeypatch: pytest.
 
 def test_ppo_shows_no_missing_loss_and_stops_at_its_steps(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # the actor stays frozen (value warm-up) through every validation: no policy loss yet
-    tiny = ["--num-envs", "4", "--rollout-steps", "10", "--eval-every", "20", "--eval-episodes", "2", "--value-warmup", "5"]
-    assert main(["ppo", "--init-actor", str(shipped_checkpoint("disc2d")), "--steps", "60", *tiny, "--run-dir", str(tmp_path)]) == 0
+    tiny = [
+        "--num-envs",
+        "4",
+        "--rollout-steps",
+        "10",
+        "--eval-every",
+        "20",
+        "--eval-episodes",
+        "2",
+        "--value-warmup",
+        "5",
+    ]
+    assert (
+        main(
+            [
+                "ppo",
+                "--init-actor",
+                str(shipped_checkpoint("disc2d")),
+                "--steps",
+                "60",
+                *tiny,
+                "--run-dir",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     out, err = capsys.readouterr()
     _no_sentinels(out + err)
     assert "value_loss=" in out and "policy_loss" not in out + err  # (the rows printed at each validation)
@@ -309,7 +507,9 @@ def test_ppo_rounds_its_last_rollout_up_to_whole_steps_of_every_environment() ->
     from pointplan.learning.ppo import PPOConfig, PPORun
 
     def rollout(total: int, steps: int) -> int:
-        return PPORun.next_rollout(SimpleNamespace(cfg=PPOConfig(num_envs=4, rollout_steps=10, total_steps=total), steps=steps))  # type: ignore[arg-type]
+        return PPORun.next_rollout(
+            SimpleNamespace(cfg=PPOConfig(num_envs=4, rollout_steps=10, total_steps=total), steps=steps)  # type: ignore[arg-type]
+        )
 
     assert [rollout(100, s) for s in (0, 40, 80)] == [10, 10, 5]  # 80 + 4 x 5 = 100
     assert rollout(98, 80) == 5  # 18 left: 20, the multiple of 4 above

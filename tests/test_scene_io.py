@@ -55,8 +55,20 @@ def base_3d() -> dict[str, Any]:
             {"type": "box", "center": [0, 0, 0.5], "size": [0.4, 0.2, 1.0], "quaternion": [0, 0, 0.3826834, 0.9238795]},
             {"type": "sphere", "center": [0.5, 0.5, 1.0], "radius": 0.1},
             {"type": "capsule", "a": [-0.5, 0.5, 0.2], "b": [-0.5, 0.5, 1.2], "radius": 0.05},
-            {"type": "cylinder", "center": [0.5, -0.5, 1], "radius": 0.1, "length": 0.6, "quaternion": [0.7071068, 0, 0, 0.7071068]},
-            {"type": "mesh", "path": "meshes/block.obj", "scale": 0.5, "position": [-0.5, -0.5, 1.0], "quaternion": [0, 0, 0, 1]},
+            {
+                "type": "cylinder",
+                "center": [0.5, -0.5, 1],
+                "radius": 0.1,
+                "length": 0.6,
+                "quaternion": [0.7071068, 0, 0, 0.7071068],
+            },
+            {
+                "type": "mesh",
+                "path": "meshes/block.obj",
+                "scale": 0.5,
+                "position": [-0.5, -0.5, 1.0],
+                "quaternion": [0, 0, 0, 1],
+            },
             {"type": "points", "path": "rock.xyz"},
         ],
         "problems": [{"start": [0.6, 0.0, 0.3, 0, 0, 0, 1], "goal": [-0.6, 0.0, 1.7, 0, 0, 0.7071068, 0.7071068]}],
@@ -123,7 +135,13 @@ def test_mesh_pose_is_applied(assets: Path) -> None:
     doc = base_3d()
     rot = lie.so3_exp([0.3, -0.2, 1.0])
     doc["obstacles"] = [
-        {"type": "mesh", "path": "meshes/block.obj", "scale": [1, 2, 3], "position": [0.1, 0.2, 0.3], "quaternion": lie.matrix_to_quat(rot).tolist()}
+        {
+            "type": "mesh",
+            "path": "meshes/block.obj",
+            "scale": [1, 2, 3],
+            "position": [0.1, 0.2, 0.3],
+            "quaternion": lie.matrix_to_quat(rot).tolist(),
+        }
     ]
     mesh = load_scene(write(assets, doc)).scene.obstacles[0]
     raw = trimesh.load(assets / "meshes" / "block.obj", force="mesh", process=False)
@@ -134,7 +152,9 @@ def test_mesh_pose_is_applied(assets: Path) -> None:
 @pytest.mark.parametrize("suffix,sep", [(".xyz", " "), (".txt", "\t"), (".csv", ",")])
 def test_points_text_files(tmp_path: Path, suffix: str, sep: str) -> None:
     data = np.array([[0.1, 0.2, 1.0, 0.0], [0.3, 0.4, 0.0, 2.0]])
-    (tmp_path / f"p{suffix}").write_text("# x y nx ny\n" + "\n".join(sep.join(repr(float(x)) for x in row) for row in data) + "\n")
+    (tmp_path / f"p{suffix}").write_text(
+        "# x y nx ny\n" + "\n".join(sep.join(repr(float(x)) for x in row) for row in data) + "\n"
+    )
     doc = base_2d()
     doc["obstacles"] = [{"type": "points", "path": f"p{suffix}"}]
     cloud = load_scene(write(tmp_path, doc)).scene.obstacles[0]
@@ -142,14 +162,22 @@ def test_points_text_files(tmp_path: Path, suffix: str, sep: str) -> None:
     np.testing.assert_allclose(cloud.normals, [[1, 0], [0, 1]])  # normalised
 
 
-def test_paths_are_relative_to_the_json_file(assets: Path, tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_paths_are_relative_to_the_json_file(
+    assets: Path, tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch
+) -> None:
     path = write(assets, base_3d())
     monkeypatch.chdir(tmp_path_factory.mktemp("elsewhere"))
     assert len(load_scene(path).scene.obstacles) == 6
 
 
 def test_optional_fields(tmp_path: Path) -> None:
-    doc = {"format": "pointplan-scene", "version": 1, "dim": 3, "bounds": {"low": [0, 0, 0], "high": [1, 1, 1]}, "obstacles": []}
+    doc = {
+        "format": "pointplan-scene",
+        "version": 1,
+        "dim": 3,
+        "bounds": {"low": [0, 0, 0], "high": [1, 1, 1]},
+        "obstacles": [],
+    }
     f = load_scene(write(tmp_path, doc))
     assert f.robot is None and f.problems == [] and f.scene.obstacles == []
     # without a robot, 3D problems may hold positions (3) or poses (7), one kind per file
@@ -242,7 +270,9 @@ def test_round_trip_of_loaded_file(assets: Path, make: Callable[[], dict[str, An
     rng = np.random.default_rng(1)
     d = first.scene.dim
     c = rng.uniform(first.scene.low, first.scene.high, (300, d))
-    np.testing.assert_array_equal(first.scene.world.spheres_collide(c, 0.05), second.scene.world.spheres_collide(c, 0.05))
+    np.testing.assert_array_equal(
+        first.scene.world.spheres_collide(c, 0.05), second.scene.world.spheres_collide(c, 0.05)
+    )
 
 
 def test_round_trip_of_built_scene(tmp_path: Path) -> None:
@@ -374,8 +404,18 @@ CASES_2D = [
     ("obstacles[3].path", "nowhere.npy", "obstacles[3].path", "file not found: 'nowhere.npy'"),
     ("obstacles[3].path", 3, "obstacles[3].path", "expected a file name"),
     ("obstacles[3].path", "wall2d.obj", "obstacles[3].path", "unsupported file type '.obj'"),
-    ("obstacles[3].path", "wall3d.npy", "obstacles[3].path", r"'wall3d.npy' holds 3D points \(z is not 0 everywhere\) but the scene is 2D"),
-    ("obstacles[3].path", "wide.npy", "obstacles[3].path", r"expected an array \(P, 2\) or \(P, 3\) of points.*got shape \(5, 5\)"),
+    (
+        "obstacles[3].path",
+        "wall3d.npy",
+        "obstacles[3].path",
+        r"'wall3d.npy' holds 3D points \(z is not 0 everywhere\) but the scene is 2D",
+    ),
+    (
+        "obstacles[3].path",
+        "wide.npy",
+        "obstacles[3].path",
+        r"expected an array \(P, 2\) or \(P, 3\) of points.*got shape \(5, 5\)",
+    ),
     ("obstacles[3].path", "bad.csv", "obstacles[3].path", "cannot read points file 'bad.csv'"),
     ("obstacles[3].path", "nan.npy", "obstacles[3].path", "contains NaN or infinite"),
     ("problems", {}, "problems", "expected a list"),
@@ -393,7 +433,12 @@ CASES_3D = [
     ("obstacles[0].size", [1, -2], "obstacles[0].size", r"expected 3 positive numbers, got \[1, -2\]"),
     ("obstacles[0].size", [1, -2, 1], "obstacles[0].size", r"expected 3 positive numbers, got \[1, -2, 1\]"),
     ("obstacles[0].center", [0, 0], "obstacles[0].center", "expected 3 numbers"),
-    ("obstacles[0].quaternion", [0, 0, 0, 0], "obstacles[0].quaternion", r"expected 4 numbers, not all zero, got \[0, 0, 0, 0\]"),
+    (
+        "obstacles[0].quaternion",
+        [0, 0, 0, 0],
+        "obstacles[0].quaternion",
+        r"expected 4 numbers, not all zero, got \[0, 0, 0, 0\]",
+    ),
     ("obstacles[0].quaternion", [0, 0, 1], "obstacles[0].quaternion", "expected 4 numbers"),
     ("obstacles[0].angle", 0.3, "obstacles[0].angle", "unknown field for a 3D box"),
     ("obstacles[3].length", 0, "obstacles[3].length", "expected a positive number"),

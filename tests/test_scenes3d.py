@@ -72,7 +72,12 @@ def test_workspaces_deterministic_disjoint_problems_free(name: str) -> None:
     for split in ("train", "val", "test"):
         for i in range(20):
             obs = sc.scene(split, i).obstacles
-            fingerprints[(split, i)] = tuple(np.round(np.concatenate([np.ravel(getattr(o, "center", getattr(o, "vertices", np.zeros(1)))) for o in obs]), 9))
+            fingerprints[(split, i)] = tuple(
+                np.round(
+                    np.concatenate([np.ravel(getattr(o, "center", getattr(o, "vertices", np.zeros(1)))) for o in obs]),
+                    9,
+                )
+            )
     if name != "qureshi3d":  # Qureshi layouts are 10! permutations: collisions possible but rare
         assert len(set(fingerprints.values())) == len(fingerprints)
     for robot in ("sphere3d", "sshape"):
@@ -119,7 +124,7 @@ def test_slot_width_and_sides() -> None:
         side = slot["center"].copy()
         side[3 - slot["long_axis"]] += slot["width"] / 2 + 0.01
         assert scene.world.spheres_collide(side[None], 0.005).all()
-    assert 2 * 0.036 <= min(widths) and max(widths) <= 8 * 0.036
+    assert min(widths) >= 2 * 0.036 and max(widths) <= 8 * 0.036
     for p in sc.problems("test", 6):
         assert p.start[0] <= -0.3 and p.goal[0] >= 0.3
 
@@ -128,10 +133,12 @@ def test_slotwide_draws_only_wide_slots_from_its_own_workspaces() -> None:
     wide, slot = make_scenario("slotwide"), make_scenario("slot")
     assert wide.robot.name == "sshape"
     widths = [wide.scene("train", i).__dict__["slot"]["width"] for i in range(40)]
-    assert 4 * 0.036 <= min(widths) and max(widths) <= 8 * 0.036
+    assert min(widths) >= 4 * 0.036 and max(widths) <= 8 * 0.036
     assert max(widths) - min(widths) > 2 * 0.036  # the range is used, not one width
     # its own stream: the same index is not Slot's workspace with another width
-    assert not np.allclose(wide.scene("train", 0).__dict__["slot"]["center"], slot.scene("train", 0).__dict__["slot"]["center"])
+    assert not np.allclose(
+        wide.scene("train", 0).__dict__["slot"]["center"], slot.scene("train", 0).__dict__["slot"]["center"]
+    )
 
 
 def test_qureshi_sizes_are_permuted_at_fixed_centres() -> None:
@@ -202,7 +209,9 @@ def test_global_points_lie_on_surfaces_with_outward_normals() -> None:
     for b in boxes:
         assert not np.any(np.all(np.abs((out - b.center) @ b.rotation) < b.half - 1e-9, axis=1))
     # area-weighted: the share of points on each box tracks its share of the area
-    many = np.concatenate([env.core.observer.observe(env.core.q, np.random.default_rng(k), env.core.t)[0] for k in range(20)])
+    many = np.concatenate(
+        [env.core.observer.observe(env.core.q, np.random.default_rng(k), env.core.t)[0] for k in range(20)]
+    )
     owner = np.argmin(np.stack([surface_gap(b, many[:, :3] + env.core.q[0]) for b in boxes]), 0)
     share = np.bincount(owner, minlength=len(boxes)) / len(owner)
     area = np.array([2 * (b.size[0] * b.size[1] + b.size[1] * b.size[2] + b.size[0] * b.size[2]) for b in boxes])
@@ -221,26 +230,36 @@ def test_local_rays_hit_surfaces_facing_the_rays(robot: str) -> None:
     pts, nrm, ok = observer.cast(env.core.q, env.core.t)
     assert ok.any()
     p, n = pts[0][ok[0]], nrm[0][ok[0]]
-    shapes = list(problem.scene.obstacles) + __import__("pointplan.observers.rays", fromlist=["wall_slabs"]).wall_slabs(problem.scene.low, problem.scene.high)
+    shapes = list(problem.scene.obstacles) + __import__("pointplan.observers.rays", fromlist=["wall_slabs"]).wall_slabs(
+        problem.scene.low, problem.scene.high
+    )
     d2 = []
     for s in shapes:
-        if isinstance(s, Box) or isinstance(s, Sphere):
+        if isinstance(s, (Box, Sphere)):
             d2.append(surface_gap(s, p) ** 2)
         elif isinstance(s, Capsule):
             d2.append((np.sqrt(point_segment_sqdist(p, s.a[None], s.b[None])[:, 0]) - s.radius) ** 2)
         elif isinstance(s, Cylinder):
             # on the surface: inside the slightly grown cylinder, outside the shrunk one
-            grown = point_cylinder_sqdist(p, s.center[None], s.rotation[None], np.array([s.radius + 1e-6]), np.array([s.length / 2 + 1e-6]))[:, 0]
-            shrunk = point_cylinder_sqdist(p, s.center[None], s.rotation[None], np.array([s.radius - 1e-6]), np.array([s.length / 2 - 1e-6]))[:, 0]
+            grown = point_cylinder_sqdist(
+                p, s.center[None], s.rotation[None], np.array([s.radius + 1e-6]), np.array([s.length / 2 + 1e-6])
+            )[:, 0]
+            shrunk = point_cylinder_sqdist(
+                p, s.center[None], s.rotation[None], np.array([s.radius - 1e-6]), np.array([s.length / 2 - 1e-6])
+            )[:, 0]
             d2.append(np.where((grown <= 0) & (shrunk > 0), 0.0, 1.0))
         elif isinstance(s, Cone):
-            grown = point_cone_sqdist(p, s.center[None], s.rotation[None], np.array([s.radius]), np.array([s.length / 2]))[:, 0]
+            grown = point_cone_sqdist(
+                p, s.center[None], s.rotation[None], np.array([s.radius]), np.array([s.length / 2])
+            )[:, 0]
             d2.append(np.where(grown <= 1e-10, 0.0, 1.0))
         elif isinstance(s, Mesh):
             continue
     assert np.min(d2, axis=0).max() < 1e-8
     # normals are unit and face the ray that found them
-    origins = np.einsum("ij,rj->ri", env.robot.rotations(env.core.q[0]), observer.body_origins) + env.robot.positions(env.core.q[0])
+    origins = np.einsum("ij,rj->ri", env.robot.rotations(env.core.q[0]), observer.body_origins) + env.robot.positions(
+        env.core.q[0]
+    )
     dirs = np.einsum("ij,rj->ri", env.robot.rotations(env.core.q[0]), observer.body_dirs)[ok[0]]
     np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-6)
     assert np.all(np.einsum("ri,ri->r", n, dirs) <= 1e-9)
@@ -257,7 +276,11 @@ def test_birrt_solves_fixed_problems_and_paths_pass_the_check(name: str) -> None
     robots = ["sshape"] if name.startswith("slot") else ["sphere3d", "sshape"]
     for robot in robots:
         # Slot: the widest slot (8 bars) keeps the test fast; narrow ones take 1e4+ nodes
-        sc = SlotScenario(config=SlotConfig(min_width_bars=8, max_width_bars=8)) if name.startswith("slot") else make_scenario(name, robot=robot)
+        sc = (
+            SlotScenario(config=SlotConfig(min_width_bars=8, max_width_bars=8))
+            if name.startswith("slot")
+            else make_scenario(name, robot=robot)
+        )
         planner = make_planner("birrt", sc.robot, seed=0, max_nodes=20000)
         problems = sc.problems("test", 2)
         for p in problems:
@@ -274,7 +297,11 @@ def test_straight_line_in_3d_and_timed_paths() -> None:
     sc = make_scenario("boxes3d", robot="sshape")
     straight = make_planner("straight", sc.robot)
     results = [straight.plan(p) for p in sc.problems("test", 10)]
-    assert all(r.success == bool(check_path(sc.robot, p, r.path)) for r, p in zip(results, sc.problems("test", 10)) if r.success)
+    assert all(
+        r.success == bool(check_path(sc.robot, p, r.path))
+        for r, p in zip(results, sc.problems("test", 10))
+        if r.success
+    )
     robot = make_robot("sshape")
     path = np.array([[0, 0, 0, 0, 0, 0, 1.0], [0.2, 0, 0, 0, 0, 0, 1.0]])
     timed = timed_path(robot, path)

@@ -29,7 +29,11 @@ def test_the_tools_are_found() -> None:
 @pytest.mark.parametrize("path", TOOLS, ids=[p.stem for p in TOOLS])
 def test_help_names_the_tools_purpose(path: Path) -> None:
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
-    run = subprocess.run([sys.executable, str(path), "--help"], capture_output=True, text=True, timeout=120, env=env, cwd=SCRIPTS.parent)
+    run = subprocess.run(
+        [sys.executable, str(path), "--help"], capture_output=True, text=True, timeout=120, env=env, cwd=SCRIPTS.parent
+    )
     assert run.returncode == 0, run.stderr
     assert run.stdout.startswith("usage:"), run.stdout[:200]
-    assert _purpose(path) in " ".join(run.stdout.split()), f"{path.name}: the help does not give the docstring's first paragraph"
+    assert _purpose(path) in " ".join(run.stdout.split()), (
+        f"{path.name}: the help does not give the docstring's first paragraph"
+    )

@@ -38,7 +38,11 @@ def test_the_sshape_policy_ships_and_its_paths_are_certified() -> None:
     scenario = make_scenario("boxes3d", robot="sshape")
     assert make_planner("policy", scenario.robot, observation="global").policy.observation == "global"
     planner = make_planner("policy", scenario.robot)
-    assert planner.policy.observation == "local" and planner.policy.robot.name == "sshape" and planner.policy.n_points == 64
+    assert (
+        planner.policy.observation == "local"
+        and planner.policy.robot.name == "sshape"
+        and planner.policy.n_points == 64
+    )
     retry = make_planner("policy", scenario.robot, attempts=4)
     problems = scenario.problems("test", 12, seed=0)
     solved = solved_retry = 0

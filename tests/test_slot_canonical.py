@@ -167,7 +167,25 @@ def test_a_small_template_build_gives_a_file_like_the_shipped_one(tmp_path) -> N
     a coarse unguided sweep, one try): a certified template, written with the shipped
     file's keys and dtypes, that the expert loads and places."""
     out = tmp_path / "template.npz"
-    _tool().main(["template", "--out", str(out), "--width", "6", "--seed", "0", "--tries", "1", "--orders", "A", "--ds", "0.04", "--guide", "0"])
+    _tool().main(
+        [
+            "template",
+            "--out",
+            str(out),
+            "--width",
+            "6",
+            "--seed",
+            "0",
+            "--tries",
+            "1",
+            "--orders",
+            "A",
+            "--ds",
+            "0.04",
+            "--guide",
+            "0",
+        ]
+    )
     with np.load(out) as new, np.load(SHIPPED) as shipped:
         assert sorted(new.files) == sorted(shipped.files)
         for k in shipped.files:
@@ -199,7 +217,9 @@ def test_labels_from_states_inside_the_slot_go_on_from_there() -> None:
     not back out to the approach), and is free to the goal."""
     sc = make_scenario("slot", "sshape")
     expert = SlotThreading.load(sc.robot)
-    k = next(k for k in range(1_000_000, 1_000_050) if expert.threads(sc.problem("train", k, seed=0).scene.__dict__["slot"]))
+    k = next(
+        k for k in range(1_000_000, 1_000_050) if expert.threads(sc.problem("train", k, seed=0).scene.__dict__["slot"])
+    )
     p = sc.problem("train", k, seed=0)
     t = expert.place(p.scene.__dict__["slot"])
     mid = len(t) // 2

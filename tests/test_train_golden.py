@@ -75,7 +75,15 @@ FLOATS = ("critic_loss", "actor_loss", "alpha", "q_mean", "entropy")
 
 def test_seeded_training_matches_the_recorded_run(tmp_path):
     cfg = TrainConfig(
-        env="narrow2d", num_envs=4, total_steps=3000, warmup_steps=500, eval_every=1000, eval_episodes=20, seed=3, retry_failures=0.3, mine_episodes=10
+        env="narrow2d",
+        num_envs=4,
+        total_steps=3000,
+        warmup_steps=500,
+        eval_every=1000,
+        eval_episodes=20,
+        seed=3,
+        retry_failures=0.3,
+        mine_episodes=10,
     )
     cfg = replace(cfg, sac=replace(cfg.sac, batch_size=64, policy_avg=1e-3))
     train(replace(cfg, total_steps=2000), tmp_path, progress=False)

@@ -48,7 +48,11 @@ def outlines(tmp_path: Path) -> Path:
 # ---------------------------------------------------------------------------- capsules
 @pytest.mark.parametrize(
     "cap",
-    [Capsule([0.7, 0.2], [0.9, 0.4], 0.03), Capsule([0.5, 0.5], [0.5, 0.5], 0.05), Capsule([0.0, 0.1, 0.2], [0.3, -0.2, 0.6], 0.05)],
+    [
+        Capsule([0.7, 0.2], [0.9, 0.4], 0.03),
+        Capsule([0.5, 0.5], [0.5, 0.5], 0.05),
+        Capsule([0.0, 0.1, 0.2], [0.3, -0.2, 0.6], 0.05),
+    ],
     ids=["2d", "2d-point", "3d"],
 )
 def test_capsule_surface_points_lie_on_the_boundary_with_outward_normals(cap: Capsule) -> None:
@@ -101,14 +105,19 @@ def _docs_scene(tmp_path: Path) -> Path:
             {"type": "capsule", "a": [0.7, 0.2], "b": [0.9, 0.4], "radius": 0.03},
             {"type": "points", "path": "clouds/wall2d.npy"},
         ],
-        "problems": [{"start": [0.1, 0.1], "goal": [0.9, 0.9]}, {"start": [0.2, 0.4], "goal": [0.8, 0.6], "tag": "through-the-door"}],
+        "problems": [
+            {"start": [0.1, 0.1], "goal": [0.9, 0.9]},
+            {"start": [0.2, 0.4], "goal": [0.8, 0.6], "tag": "through-the-door"},
+        ],
     }
     path = tmp_path / "two-rooms.json"
     path.write_text(json.dumps(doc))
     return path
 
 
-def test_policy_and_render_on_the_documented_2d_scene_with_a_capsule(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_policy_and_render_on_the_documented_2d_scene_with_a_capsule(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     scene = _docs_scene(tmp_path)
     out = tmp_path / "plan.json"
     assert main(["plan", "--scene", str(scene), "--planner", "policy", "--json", str(out), "--quiet"]) in (0, 1)
@@ -138,17 +147,48 @@ def test_drawn_problems_avoid_the_inside_of_outlines(outlines: Path, tmp_path: P
     problems = CloudScenario(scene, make_robot("disc2d")).problems("test", 40)
     assert not any(_inside_a_box(q) for p in problems for q in (p.start, p.goal))
     out = tmp_path / "o.json"
-    assert main(["plan", "--points", str(outlines), "--planner", "straight", "--episodes", "4", "--json", str(out), "--quiet"]) in (0, 1)
+    assert main(
+        ["plan", "--points", str(outlines), "--planner", "straight", "--episodes", "4", "--json", str(out), "--quiet"]
+    ) in (0, 1)
     recs = json.loads(out.read_text())["problems"]
     assert len(recs) == 4 and not any(_inside_a_box(np.array(r[k])) for r in recs for k in ("start", "goal"))
 
 
 def test_a_given_start_inside_an_outline_is_warned_about(outlines: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["plan", "--points", str(outlines), "--planner", "straight", "--start", "0.3,0.5", "--goal", "0.95,0.9", "--quiet"]) in (0, 1)
+    assert main(
+        [
+            "plan",
+            "--points",
+            str(outlines),
+            "--planner",
+            "straight",
+            "--start",
+            "0.3,0.5",
+            "--goal",
+            "0.95,0.9",
+            "--quiet",
+        ]
+    ) in (0, 1)
     err = capsys.readouterr().err
     warnings = [line for line in err.splitlines() if "warning" in line]
     assert len(warnings) == 1 and "--start [0.3, 0.5] lies in a region the point cloud encloses" in warnings[0]
-    assert main(["plan", "--points", str(outlines), "--planner", "straight", "--start", "0.1,0.1", "--goal", "0.95,0.9", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "plan",
+                "--points",
+                str(outlines),
+                "--planner",
+                "straight",
+                "--start",
+                "0.1,0.1",
+                "--goal",
+                "0.95,0.9",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert "warning" not in capsys.readouterr().err
 
 
@@ -164,7 +204,23 @@ def test_automatic_bounds_hold_the_given_start_and_goal(tmp_path: Path, capsys: 
     scene = load_points_scene(wall, include=[[0.1, 0.1], [0.9, 0.1]])
     assert np.all(scene.low < [0.1, 0.0]) and np.all(scene.high > [0.9, 0.99])
     # bounds given that leave out the start: the message says that --bounds sets them
-    assert main(["plan", "--points", str(wall), "--bounds", "0.3,0,0.7,1", "--start", "0.1,0.1", "--goal", "0.6,0.1", "--quiet"]) == 2
+    assert (
+        main(
+            [
+                "plan",
+                "--points",
+                str(wall),
+                "--bounds",
+                "0.3,0,0.7,1",
+                "--start",
+                "0.1,0.1",
+                "--goal",
+                "0.6,0.1",
+                "--quiet",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "lies outside the bounds" in err and "--bounds sets them" in err
 
@@ -209,7 +265,9 @@ def test_an_output_in_a_folder_still_to_make_is_fine(tmp_path: Path) -> None:
 
 
 # ---------------------------------------------------------------------------- Ray cluster
-def test_no_ray_cluster_at_the_address_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_no_ray_cluster_at_the_address_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     ray = pytest.importorskip("ray")
 
     def no_cluster(*a: Any, **k: Any) -> None:
@@ -217,15 +275,22 @@ def test_no_ray_cluster_at_the_address_is_one_line(tmp_path: Path, monkeypatch: 
 
     monkeypatch.setattr(ray, "is_initialized", lambda: False)
     monkeypatch.setattr(ray, "init", no_cluster)
-    code = main(["train", "--workers", "4", "--address", "auto", "--steps", "1000", "--run-dir", str(tmp_path), "--quiet"])
+    code = main(
+        ["train", "--workers", "4", "--address", "auto", "--steps", "1000", "--run-dir", str(tmp_path), "--quiet"]
+    )
     err = capsys.readouterr().err.strip()
-    assert code == 2 and err == "pointplan: error: no Ray cluster at auto: start one with `ray start --head`, or leave out --address"
+    assert (
+        code == 2
+        and err == "pointplan: error: no Ray cluster at auto: start one with `ray start --head`, or leave out --address"
+    )
     assert main(["eval", "--address", "ray://head:10001", "--episodes", "2", "--quiet"]) == 2
     assert "no Ray cluster at ray://head:10001" in capsys.readouterr().err
 
 
 # ---------------------------------------------------------------------------- the demo
-def test_ctrl_c_stops_the_whole_demo(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_ctrl_c_stops_the_whole_demo(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     import pointplan.evaluation  # noqa: F401
 
     ev = sys.modules["pointplan.evaluation.evaluate"]
@@ -264,12 +329,17 @@ def test_demo_draws_the_policy_moving_with_named_titles(tmp_path: Path, monkeypa
     import pointplan.viz.plot2d as plot2d
 
     drawn: dict[str, Any] = {}
-    monkeypatch.setattr(plot2d, "render_grid", lambda problems, results, out, robot, titles=None, **k: drawn.update(results=results, titles=titles))
+    monkeypatch.setattr(
+        plot2d,
+        "render_grid",
+        lambda problems, results, out, robot, titles=None, **k: drawn.update(results=results, titles=titles),
+    )
     assert main(["demo", "--episodes", "12", "--figures", "4", "-o", str(tmp_path / "d.png"), "--quiet"]) == 0
     assert len(drawn["titles"]) == 4 and all(r.nodes > 0 and r.success for r in drawn["results"])
     assert [r.nodes for r in drawn["results"]] == sorted((r.nodes for r in drawn["results"]), reverse=True)
     assert all(
-        t.startswith("policy on narrow2d, test problem ") and t.endswith(f"\n{r.nodes} step" + ("s" if r.nodes != 1 else ""))
+        t.startswith("policy on narrow2d, test problem ")
+        and t.endswith(f"\n{r.nodes} step" + ("s" if r.nodes != 1 else ""))
         for t, r in zip(drawn["titles"], drawn["results"])
     )
 
@@ -278,12 +348,18 @@ def test_3d_demo_draws_the_policy_moving_with_named_titles(tmp_path: Path, monke
     import pointplan.viz.plot3d as plot3d
 
     drawn: dict[str, Any] = {}
-    monkeypatch.setattr(plot3d, "render_grid_3d", lambda problems, robot, paths, out, cols=3, titles=None, **k: drawn.update(titles=titles))
+    monkeypatch.setattr(
+        plot3d,
+        "render_grid_3d",
+        lambda problems, robot, paths, out, cols=3, titles=None, **k: drawn.update(titles=titles),
+    )
     monkeypatch.setattr(plot3d, "render_rollout_gif", lambda *a, **k: None)
     assert main(["demo", "--env", "boxes3d", "--episodes", "12", "-o", str(tmp_path / "d.png"), "--quiet"]) == 0
     titles = drawn["titles"]
     policy, birrt = titles[: len(titles) // 2], titles[len(titles) // 2 :]
-    assert policy and all(t.startswith("policy on boxes3d, test problem ") and not t.endswith(": 0 steps") for t in policy)
+    assert policy and all(
+        t.startswith("policy on boxes3d, test problem ") and not t.endswith(": 0 steps") for t in policy
+    )
     assert all(t.startswith("Bi-RRT on boxes3d, test problem ") for t in birrt)
 
 
@@ -294,12 +370,18 @@ def test_the_robot_is_drawn_at_its_size_above_the_markers() -> None:
     from pointplan.viz.plot2d import draw_problem
 
     robot = make_robot("disc2d")
-    problem = Problem(Scene([Box([0.5, 0.5], [0.1, 0.1])], low=np.zeros(2), high=np.ones(2)), np.array([0.1, 0.1]), np.array([0.9, 0.8]))
+    problem = Problem(
+        Scene([Box([0.5, 0.5], [0.1, 0.1])], low=np.zeros(2), high=np.ones(2)),
+        np.array([0.1, 0.1]),
+        np.array([0.9, 0.8]),
+    )
     ax = Figure().subplots()
     draw_problem(ax, problem, robot)
     marker_z = max(line.get_zorder() for line in ax.lines if len(line.get_xdata()))
     for q in (problem.start, problem.goal):
-        bodies = [p for p in ax.patches if isinstance(p, Circle) and np.allclose(p.center, q) and np.isclose(p.radius, 0.01)]
+        bodies = [
+            p for p in ax.patches if isinstance(p, Circle) and np.allclose(p.center, q) and np.isclose(p.radius, 0.01)
+        ]
         assert bodies and all(b.get_zorder() > marker_z and b.get_edgecolor()[3] == 1.0 for b in bodies)
     assert "disc2d, radius 0.01" in ax.get_legend_handles_labels()[1]
 
@@ -314,7 +396,10 @@ def test_the_sphere_is_outlined_at_its_radius_in_3d() -> None:
     ax = fig.axes[0]
     for q in (problem.start, problem.goal):
         rings = [
-            line for line in ax.lines if len(line.get_data_3d()[0]) > 10 and np.allclose(np.linalg.norm(np.stack(line.get_data_3d(), 1) - q, axis=1), 0.03)
+            line
+            for line in ax.lines
+            if len(line.get_data_3d()[0]) > 10
+            and np.allclose(np.linalg.norm(np.stack(line.get_data_3d(), 1) - q, axis=1), 0.03)
         ]
         assert len(rings) == 1
     assert "sphere3d, radius 0.03" in [t.get_text() for t in fig.legends[0].get_texts()]

@@ -4,9 +4,9 @@ the moving obstacles and the observed points where the time step says."""
 
 from __future__ import annotations
 
-import socket
 import sys
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -79,7 +79,9 @@ SHAPES = {
     # wound inwards: the viewer's mesh must be turned outwards
     "mesh-inward": Mesh(_ICO.vertices - 0.2, _ICO.faces[:, ::-1]),
     # a triangle soup (every triangle with its own vertices): merged into a closed mesh
-    "mesh-soup": Mesh((_ICO.vertices @ ROT[3].T)[_ICO.faces].reshape(-1, 3), np.arange(3 * len(_ICO.faces)).reshape(-1, 3)),
+    "mesh-soup": Mesh(
+        (_ICO.vertices @ ROT[3].T)[_ICO.faces].reshape(-1, 3), np.arange(3 * len(_ICO.faces)).reshape(-1, 3)
+    ),
 }
 
 
@@ -128,11 +130,17 @@ def test_scene_meshes_refuse_2d_shapes() -> None:
 def test_robot_mesh_is_the_body_in_its_own_frame() -> None:
     robot = make_robot("sshape")
     p = robot.parts
-    corners = (p.box_centers[:, None] + np.einsum("pij,pkj->pki", p.box_rotations, SIGNS[None] * p.box_halfs[:, None])).reshape(-1, 3)
+    corners = (
+        p.box_centers[:, None] + np.einsum("pij,pkj->pki", p.box_rotations, SIGNS[None] * p.box_halfs[:, None])
+    ).reshape(-1, 3)
     np.testing.assert_allclose(np.asarray(robot_mesh(robot).bounds), [corners.min(0), corners.max(0)], atol=1e-12)
     ball = make_robot("sphere3d")
     r = float(ball.parts.sphere_radii[0])
-    np.testing.assert_allclose(np.asarray(robot_mesh(ball).bounds), [ball.parts.sphere_centers[0] - r, ball.parts.sphere_centers[0] + r], atol=1e-9)
+    np.testing.assert_allclose(
+        np.asarray(robot_mesh(ball).bounds),
+        [ball.parts.sphere_centers[0] - r, ball.parts.sphere_centers[0] + r],
+        atol=1e-9,
+    )
 
 
 # ---------------------------------------------------------------------------- the server
@@ -145,12 +153,6 @@ def test_missing_viser_gives_the_install_hint(monkeypatch: pytest.MonkeyPatch) -
     with pytest.raises(ImportError) as e:
         view_problem(problem, robot, block=False)
     assert str(e.value) == VIEWER_MISSING == "the interactive viewer needs viser: pip install 'pointplan[viewer]'"
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _quat(angle: float, axis) -> np.ndarray:
@@ -173,7 +175,9 @@ def dynamic_problem() -> Problem:
     return Problem(scene, start, goal, tag="viewer/test")
 
 
-def test_viewer_starts_moves_and_stops(dynamic_problem: Problem, capsys: pytest.CaptureFixture[str]) -> None:
+def test_viewer_starts_moves_and_stops(
+    dynamic_problem: Problem, capsys: pytest.CaptureFixture[str], free_port: Callable[[], int]
+) -> None:
     pytest.importorskip("viser")
     from pointplan.viz.viewer import view_problem
 
@@ -185,9 +189,11 @@ def test_viewer_starts_moves_and_stops(dynamic_problem: Problem, capsys: pytest.
     assert len(expected_timed) > 10  # several time steps, so the slider test means something
 
     def points_at(t: int) -> np.ndarray:
-        return robot.positions(expected_timed[t])[None] + np.linspace(-0.1, 0.1, 3 + t)[:, None] * np.array([1.0, 0.5, -0.25])
+        return robot.positions(expected_timed[t])[None] + np.linspace(-0.1, 0.1, 3 + t)[:, None] * np.array(
+            [1.0, 0.5, -0.25]
+        )
 
-    port = _free_port()
+    port = free_port()
     server = view_problem(dynamic_problem, robot, path=path, points_at=points_at, port=port, block=False)
     try:
         assert f":{server.get_port()}" in capsys.readouterr().out  # the URL is printed
@@ -199,15 +205,21 @@ def test_viewer_starts_moves_and_stops(dynamic_problem: Problem, capsys: pytest.
         for t in [0, 3, len(expected_timed) - 1, 7]:
             slider.value = t
             q = expected_timed[t]
-            np.testing.assert_allclose(h["robot"].position, robot.positions(q), atol=1e-6, err_msg=f"robot position at step {t}")
-            np.testing.assert_allclose(_wxyz_to_matrix(h["robot"].wxyz), robot.rotations(q), atol=1e-6, err_msg=f"robot rotation at step {t}")
+            np.testing.assert_allclose(
+                h["robot"].position, robot.positions(q), atol=1e-6, err_msg=f"robot position at step {t}"
+            )
+            np.testing.assert_allclose(
+                _wxyz_to_matrix(h["robot"].wxyz), robot.rotations(q), atol=1e-6, err_msg=f"robot rotation at step {t}"
+            )
             # the moving boxes are drawn where the scene has them at step t
             obstacles = h["obstacles"]
             assert len(obstacles) == len(scene.obstacles)
             for handle, box in zip(obstacles, scene.obstacles_at(t)):
                 corners = box.center + (SIGNS * box.half) @ box.rotation.T
                 v = np.asarray(handle.vertices, np.float64)
-                np.testing.assert_allclose(np.sort(v, 0), np.sort(corners, 0), atol=1e-5, err_msg=f"obstacle at step {t}")
+                np.testing.assert_allclose(
+                    np.sort(v, 0), np.sort(corners, 0), atol=1e-5, err_msg=f"obstacle at step {t}"
+                )
             assert h["points"].visible
             np.testing.assert_allclose(np.asarray(h["points"].points, np.float64), points_at(t), atol=1e-5)
 
@@ -225,14 +237,21 @@ def test_viewer_starts_moves_and_stops(dynamic_problem: Problem, capsys: pytest.
         server.stop()
 
 
-def test_viewer_without_a_path_shows_the_start(capsys: pytest.CaptureFixture[str]) -> None:
+def test_viewer_without_a_path_shows_the_start(
+    capsys: pytest.CaptureFixture[str], free_port: Callable[[], int]
+) -> None:
     pytest.importorskip("viser")
     from pointplan.viz.viewer import view_problem
 
     robot = make_robot("sphere3d")
-    obstacles = [SHAPES["cone"], SHAPES["cylinder"], SHAPES["mesh"], PointCloud(np.zeros((3, 3)) + 0.5, np.ones((3, 3)))]
+    obstacles = [
+        SHAPES["cone"],
+        SHAPES["cylinder"],
+        SHAPES["mesh"],
+        PointCloud(np.zeros((3, 3)) + 0.5, np.ones((3, 3))),
+    ]
     problem = Problem(Scene(obstacles, np.full(3, -1.0), np.full(3, 1.0)), [-0.8, -0.8, -0.8], [0.8, 0.8, 0.8])
-    server = view_problem(problem, robot, port=_free_port(), block=False)
+    server = view_problem(problem, robot, port=free_port(), block=False)
     try:
         h = server.pointplan
         assert h["slider"].max == 0 and len(h["timed"]) == 1
@@ -252,13 +271,13 @@ def test_viewer_refuses_2d_problems() -> None:
         view_problem(problem, make_robot("disc2d"), block=False)
 
 
-def test_a_failing_viewer_releases_its_port() -> None:
+def test_a_failing_viewer_releases_its_port(free_port: Callable[[], int]) -> None:
     pytest.importorskip("viser")
     from pointplan.viz.viewer import view_problem
 
     robot = make_robot("sphere3d")
     problem = Problem(Scene([SHAPES["sphere"]], np.full(3, -1.0), np.full(3, 1.0)), [-0.8, -0.8, -0.8], [0.8, 0.8, 0.8])
-    port = _free_port()
+    port = free_port()
     with pytest.raises(ValueError, match=r"\(N, 3\)"):
         view_problem(problem, robot, points_at=lambda t: np.zeros((4, 2)), port=port, block=False)
     server = view_problem(problem, robot, port=port, block=False)

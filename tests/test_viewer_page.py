@@ -8,14 +8,15 @@ screenshot shows both.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -27,15 +28,9 @@ pytestmark = [pytest.mark.slow, pytest.mark.skipif(CHROMIUM is None, reason="no 
 SRC = Path(__file__).resolve().parents[1] / "src"
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.fixture(scope="module")
-def viewer_url():  # type: ignore[no-untyped-def]
-    port = _free_port()
+def viewer_url(free_port: Callable[[], int]):  # type: ignore[no-untyped-def]
+    port = free_port()
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")])}
     proc = subprocess.Popen(
         [sys.executable, "-m", "pointplan", "view", "--env", "boxes3d", "--robot", "sshape", "--port", str(port)],
@@ -85,7 +80,13 @@ class _Browser:
             f"--user-data-dir={tmp}",
             "about:blank",
         ]
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)  # type: ignore[arg-type]
+        self.proc = subprocess.Popen(
+            cmd,  # type: ignore[arg-type]
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
         port_file, deadline = tmp / "DevToolsActivePort", time.monotonic() + 60
         while not (port_file.exists() and port_file.read_text().strip()):
             if self.proc.poll() is not None or time.monotonic() > deadline:
@@ -126,10 +127,8 @@ class _Browser:
     def close(self) -> None:
         if getattr(self, "ws", None) is not None:
             self.ws.close()
-        try:
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(self.proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
         self.proc.wait(timeout=20)
 
 
@@ -140,7 +139,9 @@ def browser(tmp_path: Path):  # type: ignore[no-untyped-def]
     b.close()
 
 
-def test_the_page_shows_the_scene_and_the_time_step_controls(viewer_url: str, browser: _Browser, tmp_path: Path) -> None:
+def test_the_page_shows_the_scene_and_the_time_step_controls(
+    viewer_url: str, browser: _Browser, tmp_path: Path
+) -> None:
     browser.call("Page.navigate", url=viewer_url)
     wanted = ("<canvas", "boxes3d/test/0/seed0", "sshape", "time step", "play")
     deadline, dom = time.monotonic() + 120, ""

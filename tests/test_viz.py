@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -15,7 +16,6 @@ from matplotlib.figure import Figure
 from pointplan.geometry.shapes import Box, Capsule, PointCloud, Sphere
 from pointplan.robots import Disc2D
 from pointplan.scenes import Problem, Scene
-from pointplan.scenes.scenarios import Narrow2DScenario
 from pointplan.viz import (
     draw_problem,
     grid_figsize,
@@ -53,8 +53,8 @@ def _result(problem: Problem, rng: np.random.Generator) -> FakeResult:
 
 
 @pytest.fixture(scope="module")
-def problems() -> list[Problem]:
-    return Narrow2DScenario().problems("test", 3, seed=0)
+def problems(narrow2d_test_problems: Callable[[int], list[Problem]]) -> list[Problem]:
+    return narrow2d_test_problems(3)
 
 
 def _check_png(path: Path, figsize: tuple[float, float], dpi: float) -> np.ndarray:
@@ -69,7 +69,9 @@ def _check_png(path: Path, figsize: tuple[float, float], dpi: float) -> np.ndarr
 def _check_nothing_clipped(img: np.ndarray) -> None:
     """The outermost pixel rows and columns are plain background (labels fit the figure)."""
     rgb = np.asarray(img)[..., :3].astype(np.float64)
-    border = np.concatenate([rgb[:2].reshape(-1, 3), rgb[-2:].reshape(-1, 3), rgb[:, :2].reshape(-1, 3), rgb[:, -2:].reshape(-1, 3)])
+    border = np.concatenate(
+        [rgb[:2].reshape(-1, 3), rgb[-2:].reshape(-1, 3), rgb[:, :2].reshape(-1, 3), rgb[:, -2:].reshape(-1, 3)]
+    )
     assert np.all(np.abs(border - rgb[0, 0]) < 0.05), "something is drawn on the figure's edge"
 
 
@@ -83,13 +85,23 @@ def _check_not_blank(img: np.ndarray) -> None:
 @pytest.mark.parametrize("observer_name", ["surface-normals", "surface", "interior"])
 def test_render_problem_point_observers(tmp_path: Path, problems: list[Problem], observer_name: str) -> None:
     p = problems[0]
-    out = render_problem(p, tmp_path / "p.png", Disc2D(), observer_name=observer_name, n_points=32, result=_result(p, np.random.default_rng(0)), dpi=60)
+    out = render_problem(
+        p,
+        tmp_path / "p.png",
+        Disc2D(),
+        observer_name=observer_name,
+        n_points=32,
+        result=_result(p, np.random.default_rng(0)),
+        dpi=60,
+    )
     assert out == tmp_path / "p.png"
     _check_png(out, plot2d.PROBLEM_FIGSIZE, 60)
 
 
 def test_render_problem_image_observer(tmp_path: Path, problems: list[Problem]) -> None:
-    out = render_problem(problems[1], tmp_path / "sub" / "img.png", Disc2D(), observer_name="image", title="occupancy", dpi=60)
+    out = render_problem(
+        problems[1], tmp_path / "sub" / "img.png", Disc2D(), observer_name="image", title="occupancy", dpi=60
+    )
     _check_png(out, plot2d.IMAGE_FIGSIZE, 60)
 
 

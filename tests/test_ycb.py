@@ -58,7 +58,9 @@ def test_default_set_takes_the_curated_objects_of_a_source(monkeypatch, tmp_path
     _write(tmp_path / "003_cracker_box.obj", box)
     _write(tmp_path / "035_power_drill.obj", box)
     _write(tmp_path / "999_not_curated.obj", box)
-    monkeypatch.setattr(ycb, "_bundled_sources", lambda: [("empty", tmp_path / "none", ".obj"), ("here", tmp_path, ".obj")])
+    monkeypatch.setattr(
+        ycb, "_bundled_sources", lambda: [("empty", tmp_path / "none", ".obj"), ("here", tmp_path, ".obj")]
+    )
     assert ycb.default_ycb_objects() == {
         "003_cracker_box": tmp_path / "003_cracker_box.obj",
         "035_power_drill": tmp_path / "035_power_drill.obj",
@@ -126,7 +128,9 @@ def test_load_object_mesh_repairs_holes_and_merges_split_vertices(tmp_path):
     assert tm.is_watertight and len(tm.faces) == len(torus.faces)
     assert tm.volume == pytest.approx(volume, rel=0.01)
     # every face with its own three vertices (like texture seams): merged back into a closed mesh
-    soup = trimesh.Trimesh(torus.vertices[torus.faces].reshape(-1, 3), np.arange(3 * len(torus.faces)).reshape(-1, 3), process=False)
+    soup = trimesh.Trimesh(
+        torus.vertices[torus.faces].reshape(-1, 3), np.arange(3 * len(torus.faces)).reshape(-1, 3), process=False
+    )
     assert not soup.is_watertight
     tm = _closed(ycb.load_object_mesh(_write(tmp_path / "soup.ply", soup), max_faces=4096))
     assert tm.is_watertight and len(tm.faces) == len(torus.faces)

@@ -12,9 +12,24 @@ import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:  # the commands import what they run when they run
+    from argparse import _SubParsersAction
+
+    from .evaluation.evaluate import EpisodeRecord, EvalReport
+    from .learning.collision import CollisionConfig
+    from .learning.dagger import DaggerConfig
+    from .learning.train import TrainConfig
+    from .models.actor_critic import NetConfig
+    from .parallel import WorkerPool
+    from .planners.base import Planner
+    from .robots.base import Robot
+    from .scenes.base import Scenario
+    from .scenes.io import CloudScenario
+    from .scenes.scene import Problem, Scene
 
 
 class CLIError(Exception):
@@ -51,7 +66,7 @@ def _numbers(text: str | None, what: str) -> np.ndarray | None:
         raise CLIError(f"{what}: expected numbers separated by commas, got {text!r}") from None
 
 
-def _given_problem(args: argparse.Namespace, scene: Any, robot: Any) -> list[Any]:
+def _given_problem(args: argparse.Namespace, scene: Scene, robot: Robot) -> list[Problem]:
     """The problem of --start/--goal (none if neither is given)."""
     from .scenes import Problem
 
@@ -70,12 +85,14 @@ def _given_problem(args: argparse.Namespace, scene: Any, robot: Any) -> list[Any
             q = np.concatenate([q[:3], q[3:] / np.linalg.norm(q[3:])])
         if np.any(q[: scene.dim] < scene.low) or np.any(q[: scene.dim] > scene.high):
             hint = "; --bounds sets them (low then high)" if getattr(args, "points", None) else " of the scene file"
-            raise CLIError(f"{what}: position {q[: scene.dim].tolist()} lies outside the bounds {scene.low.tolist()} .. {scene.high.tolist()}{hint}")
+            raise CLIError(
+                f"{what}: position {q[: scene.dim].tolist()} lies outside the bounds {scene.low.tolist()} .. {scene.high.tolist()}{hint}"
+            )
         qs.append(q)
     return [Problem(scene, qs[0], qs[1], tag=f"{scene.name}/given")]
 
 
-def _scenario(args: argparse.Namespace) -> Any:
+def _scenario(args: argparse.Namespace) -> Scenario:
     from .robots import make_robot
     from .scenes.scenarios import make_scenario
 
@@ -94,8 +111,17 @@ def _scenario(args: argparse.Namespace) -> Any:
                 if dim is not None and len(bounds) != 2 * dim:
                     raise CLIError(f"--bounds: {robot_arg} moves in {dim}D, got {len(bounds)} numbers")
                 dim = len(bounds) // 2
-            given = [q for q in (_numbers(getattr(args, "start", None), "--start"), _numbers(getattr(args, "goal", None), "--goal")) if q is not None]
-            scene = load_points_scene(args.points, dim=dim, bounds=None if bounds is None else (bounds[:dim], bounds[dim:]), include=given)
+            given = [
+                q
+                for q in (
+                    _numbers(getattr(args, "start", None), "--start"),
+                    _numbers(getattr(args, "goal", None), "--goal"),
+                )
+                if q is not None
+            ]
+            scene = load_points_scene(
+                args.points, dim=dim, bounds=None if bounds is None else (bounds[:dim], bounds[dim:]), include=given
+            )
             sf_robot, fixed = None, []
         else:
             sf = load_scene(args.scene)
@@ -113,7 +139,7 @@ def _scenario(args: argparse.Namespace) -> Any:
         raise CLIError(str(e)) from None
 
 
-def _warn_enclosed(scenario: Any) -> None:
+def _warn_enclosed(scenario: CloudScenario) -> None:
     """One line on stderr for each start or goal of the scenario's fixed problems that lies
     in a region its 2D point clouds enclose."""
     if scenario.enclosed is None:
@@ -124,7 +150,10 @@ def _warn_enclosed(scenario: Any) -> None:
             if hit:
                 what = f"--{name}" if p.tag.endswith("/given") else f"{p.tag}: the {name}"
                 pos = [round(float(x), 4) for x in scenario.robot.positions(q)]
-                print(f"pointplan: warning: {what} {pos} lies in a region the point cloud encloses (inside an obstacle's outline?)", file=sys.stderr)
+                print(
+                    f"pointplan: warning: {what} {pos} lies in a region the point cloud encloses (inside an obstacle's outline?)",
+                    file=sys.stderr,
+                )
 
 
 #: planners that take --checkpoint
@@ -167,7 +196,7 @@ def _check_checkpoint(args: argparse.Namespace, names: Sequence[str]) -> None:
         raise CLIError(f"--checkpoint: give either {' or '.join(kinds)}, not {which}: each takes its own checkpoint")
 
 
-def _policy_input(planner: Any) -> tuple[str, int] | None:
+def _policy_input(planner: Planner) -> tuple[str, int] | None:
     """The observation and point count the policy of ``planner`` sees (None without one)."""
     from .planners.hybrid import HybridPlanner
     from .planners.policy import PolicyPlanner
@@ -179,7 +208,7 @@ def _policy_input(planner: Any) -> tuple[str, int] | None:
     return str(planner.env.observation), int(planner.env.n_points or 0) or 64
 
 
-def _say_shipped(name: str, planner: Any, args: argparse.Namespace) -> None:
+def _say_shipped(name: str, planner: Planner, args: argparse.Namespace) -> None:
     """Where no --checkpoint was given, say which shipped policy ``planner`` runs and where
     it was trained (Slot has one of its own; the other 3D scenes share 3D-Boxes')."""
     from .planners.hybrid import HybridPlanner
@@ -190,10 +219,12 @@ def _say_shipped(name: str, planner: Any, args: argparse.Namespace) -> None:
     if isinstance(planner, HybridPlanner):
         planner = planner.policy
     if isinstance(planner, PolicyPlanner) and planner.policy.path is not None:
-        print(f"{name}: the shipped policy {planner.policy.path.name} (trained in {planner.policy.env}, {planner.policy.observation} observations)")
+        print(
+            f"{name}: the shipped policy {planner.policy.path.name} (trained in {planner.policy.env}, {planner.policy.observation} observations)"
+        )
 
 
-def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
+def _planner(name: str, robot: Robot, args: argparse.Namespace, seed: int) -> Planner:
     from .planners import make_planner
 
     kwargs: dict[str, Any] = {}
@@ -202,10 +233,13 @@ def _planner(name: str, robot: Any, args: argparse.Namespace, seed: int) -> Any:
     elif name.lower() in LSAMPLE_PLANNERS:
         kwargs = {"max_nodes": args.max_nodes, "seed": seed, "checkpoint": getattr(args, "checkpoint", None)}
     elif name in POLICY_PLANNERS:
-        kwargs = {"checkpoint": getattr(args, "checkpoint", None), "observation": getattr(args, "observation", None), "scene": getattr(args, "env", None)}
-        if getattr(args, "no_greedy_goal", False):
-            if name == "policy":
-                kwargs["greedy_goal"] = False
+        kwargs = {
+            "checkpoint": getattr(args, "checkpoint", None),
+            "observation": getattr(args, "observation", None),
+            "scene": getattr(args, "env", None),
+        }
+        if getattr(args, "no_greedy_goal", False) and name == "policy":
+            kwargs["greedy_goal"] = False
         if getattr(args, "attempts", 1) > 1:
             kwargs.update(attempts=args.attempts, action_noise=args.action_noise)
         if getattr(args, "escape", None) is not None:
@@ -234,9 +268,16 @@ def _write_json(path: str | None, payload: dict[str, Any]) -> None:
 
 
 def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> None:
-    p.add_argument("--env", default="narrow2d", help="scenario: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d (default: narrow2d)")
+    p.add_argument(
+        "--env",
+        default="narrow2d",
+        help="scenario: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d (default: narrow2d)",
+    )
     p.add_argument("--scene", help="plan on a scene file (JSON, see docs/scenes.md) instead of --env")
-    p.add_argument("--robot", help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot), or the robot of a scene file that names none")
+    p.add_argument(
+        "--robot",
+        help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot), or the robot of a scene file that names none",
+    )
     p.add_argument(
         "--planner",
         default=planner_default,
@@ -257,7 +298,9 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
         help="Bi-RRT node budget (hybrid and mpnet-hr: per Bi-RRT call; also the lsample planners') (default: %(default)s)",
     )
     p.add_argument("--time-limit", type=float, help="seconds per problem for ompl:NAME planners (default: 1)")
-    p.add_argument("--range", type=float, help="longest edge of ompl:NAME planners that have one (default: 0.07, Bi-RRT's step)")
+    p.add_argument(
+        "--range", type=float, help="longest edge of ompl:NAME planners that have one (default: 0.07, Bi-RRT's step)"
+    )
     p.add_argument(
         "--no-greedy-goal",
         action="store_true",
@@ -280,7 +323,9 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
         type=non_negative_int,
         help="--planner policy or hybrid: where the robot is stuck, this many steps of the robot's escape, then the mean action toward the goal again; 0 turns it off (default: 10 for the S-shape, which samples from twice the policy's spread after a step that did not move it, and for the sphere, which heads for a random subgoal after 6 steps that ended within 0.1 of where they started; both chosen on validation; 0 for the disc)",
     )
-    p.add_argument("--seed", type=non_negative_int, default=0, help="problem-set seed, 0 or more (default: %(default)s)")
+    p.add_argument(
+        "--seed", type=non_negative_int, default=0, help="problem-set seed, 0 or more (default: %(default)s)"
+    )
 
 
 # ---------------------------------------------------------------------------- commands
@@ -353,7 +398,7 @@ def _workers(args: argparse.Namespace) -> tuple[int | None, str | None] | None:
     return workers, address
 
 
-def _pool(args: argparse.Namespace) -> Any:
+def _pool(args: argparse.Namespace) -> WorkerPool | None:
     """The Ray worker pool of ``--workers`` / ``--address`` for :func:`evaluate`, or None
     (one process)."""
     scale = _workers(args)
@@ -364,7 +409,7 @@ def _pool(args: argparse.Namespace) -> Any:
     return RayPool(*scale)
 
 
-def _demo_pool(workers: int, address: str | None) -> Any:
+def _demo_pool(workers: int, address: str | None) -> WorkerPool | None:
     """Ray workers to plan demonstrations on when asked for and Ray is installed; None
     leaves it to the trainer (one process, or local processes without Ray)."""
     from .distributed import RayPool, ray_available, wants_ray
@@ -374,10 +419,15 @@ def _demo_pool(workers: int, address: str | None) -> Any:
     return None
 
 
-def _test_problems(scenario: Any, args: argparse.Namespace, n: int) -> Any:
+def _test_problems(scenario: Scenario, args: argparse.Namespace, n: int) -> Sequence[Problem]:
     """The first ``n`` test problems; on Ray workers a registered scenario's problems
     travel as their recipe and are rebuilt by the workers (the same problems)."""
-    if _workers(args) and not getattr(scenario, "fixed", None) and not getattr(args, "scene", None) and not getattr(args, "points", None):
+    if (
+        _workers(args)
+        and not getattr(scenario, "fixed", None)
+        and not getattr(args, "scene", None)
+        and not getattr(args, "points", None)
+    ):
         from .distributed import ScenarioProblems
 
         return ScenarioProblems.of(scenario, "test", n, seed=args.seed)
@@ -408,7 +458,13 @@ def cmd_render(args: argparse.Namespace) -> int:
         if args.gif:
             raise CLIError("--gif animates 3D scenes; for 2D use the PNG")
         render_problem(
-            problem, args.output, robot, observer_name=args.observation or "surface-normals", n_points=args.n_points or 64, result=result, seed=args.seed
+            problem,
+            args.output,
+            robot,
+            observer_name=args.observation or "surface-normals",
+            n_points=args.n_points or 64,
+            result=result,
+            seed=args.seed,
         )
         print(f"wrote {args.output}")
         return 0
@@ -417,24 +473,36 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     observation = args.observation or "global"
     if observation not in ("global", "local", "local-near", "local-wide"):
-        raise CLIError(f"3D scenes are observed as 'global', 'local', 'local-near' or 'local-wide', not {observation!r}")
+        raise CLIError(
+            f"3D scenes are observed as 'global', 'local', 'local-near' or 'local-wide', not {observation!r}"
+        )
     path = result.path if result is not None and len(result.path) else None
     pts, nrm = world_observation(problem, robot, observation, args.n_points, problem.start, 0, args.seed)
     title = f"{problem.tag}  ({observation} observation)"
-    render_problem_3d(problem, robot, path=path, points=pts, normals=nrm, output=args.output, title=title, obstacles=problem.scene.obstacles_at(0))
+    render_problem_3d(
+        problem,
+        robot,
+        path=path,
+        points=pts,
+        normals=nrm,
+        output=args.output,
+        title=title,
+        obstacles=problem.scene.obstacles_at(0),
+    )
     print(f"wrote {args.output}")
     if args.gif:
         if path is None:
             raise CLIError("--gif needs a path: pick a planner that solves the problem")
         timed = timed_path(robot, path)
         scene = problem.scene
+        points_at = lambda t: world_observation(problem, robot, observation, args.n_points, timed[t], t, args.seed)[0]
         render_rollout_gif(
             problem,
             robot,
             timed,
             args.gif,
             obstacles_at=scene.obstacles_at if scene.dynamic else None,
-            points_at=lambda t: world_observation(problem, robot, observation, args.n_points, timed[t], t, args.seed)[0],
+            points_at=points_at,
         )
         print(f"wrote {args.gif} ({len(timed)} frames, one per time step)")
     return 0
@@ -466,7 +534,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     if args.observation:
         timed = timed_path(robot, path) if path is not None else problem.start[None]
 
-        def points_at(t: int) -> Any:
+        def points_at(t: int) -> np.ndarray:
             return world_observation(problem, robot, args.observation, args.n_points, timed[t], t, args.seed)[0]
 
     view_problem(problem, robot, path=path, points_at=points_at, port=args.port, host=args.host)
@@ -481,10 +549,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     _check_writable(args.json, "--json")
     _check_writable(args.output, "-o/--output")
     scenario = _scenario(args)
-    if getattr(scenario, "fixed", None):
-        problems = scenario.fixed
-    else:
-        problems = _test_problems(scenario, args, args.episodes)
+    problems: Sequence[Problem] = getattr(scenario, "fixed", None) or _test_problems(scenario, args, args.episodes)
     if getattr(args, "start", None) and getattr(args, "goal", None):  # the one problem given
         fault = endpoint_fault(scenario.robot, problems[0])
         if fault:
@@ -509,7 +574,13 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return 0 if ok else 1
 
 
-def _draw_plan(args: argparse.Namespace, robot: Any, problems: Sequence[Any], records: Sequence[Any], planner: Any) -> None:
+def _draw_plan(
+    args: argparse.Namespace,
+    robot: Robot,
+    problems: Sequence[Problem],
+    records: Sequence[EpisodeRecord],
+    planner: Planner,
+) -> None:
     """The problems, their obstacles (point clouds as their points) and the paths of the
     evaluation's records: one problem alone (in 2D planned again, to draw Bi-RRT's trees),
     several in a grid."""
@@ -521,16 +592,36 @@ def _draw_plan(args: argparse.Namespace, robot: Any, problems: Sequence[Any], re
         if len(problems) == 1:
             render_problem(problems[0], args.output, robot, result=planner.plan(problems[0]), seed=args.seed)
         else:
-            render_grid(problems, records, args.output, robot, titles=[f"{p.tag.split('/', 1)[-1]}\n{v}" for p, v in zip(problems, verdicts)])
+            render_grid(
+                problems,
+                records,
+                args.output,
+                robot,
+                titles=[f"{p.tag.split('/', 1)[-1]}\n{v}" for p, v in zip(problems, verdicts)],
+            )
     else:
         from .viz.plot3d import render_grid_3d, render_problem_3d
 
         paths = [np.asarray(r.path) if len(r.path) else None for r in records]
         if len(problems) == 1:
             title = f"{problems[0].tag}: {verdicts[0]}"
-            render_problem_3d(problems[0], robot, path=paths[0], output=args.output, title=title, obstacles=problems[0].scene.obstacles_at(0))
+            render_problem_3d(
+                problems[0],
+                robot,
+                path=paths[0],
+                output=args.output,
+                title=title,
+                obstacles=problems[0].scene.obstacles_at(0),
+            )
         else:
-            render_grid_3d(problems, robot, paths, args.output, cols=min(3, len(problems)), titles=[f"{p.tag}: {v}" for p, v in zip(problems, verdicts)])
+            render_grid_3d(
+                problems,
+                robot,
+                paths,
+                args.output,
+                cols=min(3, len(problems)),
+                titles=[f"{p.tag}: {v}" for p, v in zip(problems, verdicts)],
+            )
     print(f"wrote {args.output} ({len(problems)} problem{'s' if len(problems) != 1 else ''})")
 
 
@@ -553,7 +644,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     not_run = [name for name in planners if name not in reports]
     if not_run or any(r.interrupted for r in reports.values()):
         skipped = f" ({', '.join(not_run)} not run)" if not_run else ""
-        print(f"interrupted: the table compares the first {done} of the {len(problems)} problems, which every planner above finished{skipped}; nothing drawn")
+        print(
+            f"interrupted: the table compares the first {done} of the {len(problems)} problems, which every planner above finished{skipped}; nothing drawn"
+        )
         return 130
     try:
         _demo_figures(args, scenario, problems, reports)
@@ -563,26 +656,34 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _demo_planners(args: argparse.Namespace, scenario: Any) -> dict[str, Any]:
+def _demo_planners(args: argparse.Namespace, scenario: Scenario) -> dict[str, Planner]:
     """The demo's planners: the policy (shipped, or --checkpoint), Bi-RRT and the straight line."""
     from .planners import make_planner
 
     robot = scenario.robot
     observation = args.observation if args.checkpoint is None else None
     try:
-        policy = make_planner("policy", robot, checkpoint=args.checkpoint or "shipped", observation=observation, scene=scenario.name)
+        policy = make_planner(
+            "policy", robot, checkpoint=args.checkpoint or "shipped", observation=observation, scene=scenario.name
+        )
     except ValueError as e:
         raise CLIError(str(e)) from None
     _say_shipped("policy", policy, args)
-    return {"policy": policy, "birrt": make_planner("birrt", robot, seed=0, max_nodes=args.max_nodes), "straight": make_planner("straight", robot)}
+    return {
+        "policy": policy,
+        "birrt": make_planner("birrt", robot, seed=0, max_nodes=args.max_nodes),
+        "straight": make_planner("straight", robot),
+    }
 
 
-def _demo_evaluate(planners: dict[str, Any], problems: Sequence[Any], robot: Any, quiet: bool) -> dict[str, Any]:
+def _demo_evaluate(
+    planners: dict[str, Planner], problems: Sequence[Problem], robot: Robot, quiet: bool
+) -> dict[str, EvalReport]:
     """Each planner's report on ``problems``, one planner after the other; Ctrl-C stops them
     all (the planner it interrupted has the last report, holding the problems it finished)."""
     from .evaluation import evaluate
 
-    reports: dict[str, Any] = {}
+    reports: dict[str, EvalReport] = {}
     for name, planner in planners.items():
         reports[name] = evaluate(planner, problems, robot, progress=not quiet)
         if reports[name].interrupted:
@@ -590,7 +691,7 @@ def _demo_evaluate(planners: dict[str, Any], problems: Sequence[Any], robot: Any
     return reports
 
 
-def _demo_picks(records: Sequence[Any], n: int) -> list[int]:
+def _demo_picks(records: Sequence[EpisodeRecord], n: int) -> list[int]:
     """The ``n`` problems the policy solved with the most steps (the ones it solved without
     a step, by the first goal test, only when there are no others), most steps first."""
     solved = [i for i, r in enumerate(records) if r.success]
@@ -603,13 +704,15 @@ def _count(n: int, word: str) -> str:
     return f"{n} {word}" if n == 1 else f"{n} {word}s"
 
 
-def _problem_name(problem: Any) -> str:
+def _problem_name(problem: Problem) -> str:
     """``test problem 12`` for a problem tagged ``env/test/12/seed0``, else its tag."""
     parts = str(problem.tag).split("/")
     return f"{parts[1]} problem {parts[2]}" if len(parts) >= 3 else str(problem.tag)
 
 
-def _demo_figures(args: argparse.Namespace, scenario: Any, problems: Sequence[Any], reports: dict[str, Any]) -> None:
+def _demo_figures(
+    args: argparse.Namespace, scenario: Scenario, problems: Sequence[Problem], reports: dict[str, EvalReport]
+) -> None:
     """The policy's paths on the problems of :func:`_demo_picks` (in 3D Bi-RRT's below and
     a GIF), drawn from the evaluation's records."""
     records = reports["policy"].records
@@ -623,14 +726,23 @@ def _demo_figures(args: argparse.Namespace, scenario: Any, problems: Sequence[An
     if robot.dim == 2:
         from .viz.plot2d import render_grid
 
-        titles = [f"policy on {scenario.name}, {_problem_name(p)}\n{_count(r.nodes, 'step')}" for p, r in zip(shown, policy)]
+        titles = [
+            f"policy on {scenario.name}, {_problem_name(p)}\n{_count(r.nodes, 'step')}" for p, r in zip(shown, policy)
+        ]
         render_grid(shown, policy, args.output, robot, titles=titles)
         print(f"wrote {args.output}")
         return
     _demo_figures_3d(args, robot, scenario.name, shown, policy, [reports["birrt"].records[i] for i in picked])
 
 
-def _demo_figures_3d(args: argparse.Namespace, robot: Any, env: str, shown: list[Any], policy: list[Any], birrt: list[Any]) -> None:
+def _demo_figures_3d(
+    args: argparse.Namespace,
+    robot: Robot,
+    env: str,
+    shown: list[Problem],
+    policy: list[EpisodeRecord],
+    birrt: list[EpisodeRecord],
+) -> None:
     """The policy's paths (top row) and Bi-RRT's (bottom row) on the same problems, and a
     GIF of the policy on the first one."""
     from .evaluation.evaluate import timed_path
@@ -645,20 +757,36 @@ def _demo_figures_3d(args: argparse.Namespace, robot: Any, env: str, shown: list
     print(f"wrote {args.output} (policy above, Bi-RRT below)")
     gif = str(Path(args.output).with_suffix(".gif"))
     scene = shown[0].scene
-    render_rollout_gif(shown[0], robot, timed_path(robot, policy[0].path), gif, obstacles_at=scene.obstacles_at if scene.dynamic else None)
+    render_rollout_gif(
+        shown[0],
+        robot,
+        timed_path(robot, policy[0].path),
+        gif,
+        obstacles_at=scene.obstacles_at if scene.dynamic else None,
+    )
     print(f"wrote {gif} (the policy on {shown[0].tag})")
 
 
-def _net_config(args: argparse.Namespace) -> Any:
+def _net_config(args: argparse.Namespace) -> NetConfig:
     from .models.actor_critic import NetConfig
     from .models.encoders import EncoderConfig
 
     if args.paper:
-        return NetConfig(EncoderConfig(args.encoder, 256, 3), head_width=256, head_layers=3, critic_action="points", shared_encoder=False)
+        return NetConfig(
+            EncoderConfig(args.encoder, 256, 3),
+            head_width=256,
+            head_layers=3,
+            critic_action="points",
+            shared_encoder=False,
+        )
     shared = args.encoder_sharing == "shared"
     action = args.critic_action or ("pooled" if shared else "points")
     return NetConfig(
-        EncoderConfig(args.encoder, args.width, args.layers), head_width=args.width, head_layers=args.layers, critic_action=action, shared_encoder=shared
+        EncoderConfig(args.encoder, args.width, args.layers),
+        head_width=args.width,
+        head_layers=args.layers,
+        critic_action=action,
+        shared_encoder=shared,
     )
 
 
@@ -696,7 +824,7 @@ TRAIN_OPTIONS = {
 }
 
 
-def _resume_config(args: argparse.Namespace) -> Any:
+def _resume_config(args: argparse.Namespace) -> TrainConfig:
     """The configuration of the run ``--resume`` continues, with the options given on the
     command line replacing its own (the networks and the scenario cannot change)."""
     from .config import from_dict, given_options, replace_paths
@@ -715,7 +843,9 @@ def _resume_config(args: argparse.Namespace) -> Any:
     done = int(data["trainer"]["steps"])
     cfg = replace_paths(cfg, {**given_options(args, TRAIN_OPTIONS), "device": args.device})
     if cfg.total_steps <= done:
-        raise CLIError(f"--resume {args.resume}: the run has done {done} steps already; give --steps above {done} to continue it")
+        raise CLIError(
+            f"--resume {args.resume}: the run has done {done} steps already; give --steps above {done} to continue it"
+        )
     return cfg
 
 
@@ -756,9 +886,13 @@ def cmd_train(args: argparse.Namespace) -> int:
         from .distributed.rollouts import ray_rollouts
 
         rollouts = ray_rollouts(*scale, sync_every=args.sync_every)
-    res = train(cfg, run_dir, progress=not args.quiet, resume=args.resume, sync_every=args.sync_every, rollouts=rollouts)
+    res = train(
+        cfg, run_dir, progress=not args.quiet, resume=args.resume, sync_every=args.sync_every, rollouts=rollouts
+    )
     if not res.interrupted:  # (an interrupted run has said where it stopped and how to continue)
-        print(f"{_best_line(res.best_success)} after {res.steps} env steps, {res.wall_time_s:.0f} s; checkpoints in {res.run_dir}")
+        print(
+            f"{_best_line(res.best_success)} after {res.steps} env steps, {res.wall_time_s:.0f} s; checkpoints in {res.run_dir}"
+        )
     summary = {
         "run_dir": str(res.run_dir),
         "best_success": res.best_success,
@@ -806,19 +940,23 @@ def cmd_bc(args: argparse.Namespace) -> int:
     run_dir = _run_folder(args.run_dir or (str(Path(args.resume).parent) if args.resume else "runs/latest"))
     pool = _demo_pool(cfg.bc.workers, cfg.bc.address)
     if (args.dagger_rounds or args.resume) and not cloning:
-        summary = train_dagger(cfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume, pool=pool)
+        summary = train_dagger(
+            cfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume, pool=pool
+        )
     elif cfg.expert.startswith("slot-threading") and not cloning:
         summary = _bc_slot_threading(cfg, run_dir, not args.quiet)
     else:
         resume = args.resume if cloning else None
-        summary = train_bc(cfg.bc, run_dir, progress=not args.quiet, pool=pool, resume=resume, eval_episodes=cfg.eval_episodes)
+        summary = train_bc(
+            cfg.bc, run_dir, progress=not args.quiet, pool=pool, resume=resume, eval_episodes=cfg.eval_episodes
+        )
     if not summary.get("interrupted"):  # (an interrupted run has said where it stopped and how to continue)
         print(_bc_line(summary))
     _write_json(args.json, summary)
     return 130 if summary.get("interrupted") else 0
 
 
-def _bc_resume_config(args: argparse.Namespace, given: dict[str, Any]) -> tuple[Any, bool]:
+def _bc_resume_config(args: argparse.Namespace, given: dict[str, Any]) -> tuple[DaggerConfig, bool]:
     """The configuration of the run ``bc --resume`` continues (options given replace its
     own), and whether it is a cloning run (else DAgger)."""
     from .config import from_dict, replace_paths
@@ -829,18 +967,23 @@ def _bc_resume_config(args: argparse.Namespace, given: dict[str, Any]) -> tuple[
     data = load_checkpoint(args.resume)
     if "bc_trainer" in data:
         if args.dagger_rounds:
-            raise CLIError(f"--resume {args.resume}: a cloning run; finish it, then start DAgger from its bc.pt with --init-actor and --dagger-rounds")
-        episodes = int(data["bc_trainer"].get("eval_episodes") or DaggerConfig.eval_episodes)  # (the run's own unless given)
+            raise CLIError(
+                f"--resume {args.resume}: a cloning run; finish it, then start DAgger from its bc.pt with --init-actor and --dagger-rounds"
+            )
+        # (the run's own unless given)
+        episodes = int(data["bc_trainer"].get("eval_episodes") or DaggerConfig.eval_episodes)
         return replace_paths(DaggerConfig(from_dict(BCConfig, data["bc_config"]), eval_episodes=episodes), given), True
     if "dagger_config" not in data or "dagger" not in data:
-        raise CLIError(f"--resume {args.resume}: not the trainer state of a `pointplan bc` run (cloning or DAgger); resume from the run's last.pt")
+        raise CLIError(
+            f"--resume {args.resume}: not the trainer state of a `pointplan bc` run (cloning or DAgger); resume from the run's last.pt"
+        )
     cfg = replace_paths(from_dict(DaggerConfig, data["dagger_config"]), given)
     if args.dagger_rounds:
         cfg = dataclasses.replace(cfg, rounds=args.dagger_rounds)
     return cfg, False
 
 
-def _bc_slot_threading(cfg: Any, run_dir: str, progress: bool) -> dict[str, Any]:
+def _bc_slot_threading(cfg: DaggerConfig, run_dir: str, progress: bool) -> dict[str, Any]:
     """Cloning from demonstrations of the slot threading expert (planned here, kept in
     ``--demos`` or the run folder's ``demos.npz``)."""
     from .learning.bc import train_bc
@@ -863,7 +1006,11 @@ def _bc_line(summary: dict[str, Any]) -> str:
     """One line for the summary of ``bc`` (cloning alone, or with DAgger)."""
     if "checkpoint" in summary:  # cloning alone
         val = summary.get("val_success")
-        validation = f"validation success {val:.3f} on {summary['val_problems']} problems" if val is not None else "no validation yet"
+        validation = (
+            f"validation success {val:.3f} on {summary['val_problems']} problems"
+            if val is not None
+            else "no validation yet"
+        )
         return (
             f"cloned {summary['demo_steps']} steps of {summary['demo_problems']} demonstrations, final loss {summary['final_loss']:.4f}, {validation}, "
             f"{summary['demo_time_s'] + summary['train_time_s']:.0f} s; checkpoint {summary['checkpoint']}"
@@ -927,7 +1074,9 @@ def cmd_collision_classify(args: argparse.Namespace) -> int:
         names = [n.strip() for n in args.observation.split(",") if n.strip()]
         unknown = [n for n in names if n not in OBSERVATIONS]
         if unknown or not names:
-            raise CLIError(f"--observation: expected some of {', '.join(OBSERVATIONS)} (comma-separated), got {args.observation!r}")
+            raise CLIError(
+                f"--observation: expected some of {', '.join(OBSERVATIONS)} (comma-separated), got {args.observation!r}"
+            )
         base = replace_paths(CollisionConfig(observation=names[0]), given_options(args, COLLISION_OPTIONS))
     run_dir = Path(_run_folder(args.run_dir or (Path(args.resume).parent if args.resume else "runs/collision")))
     try:
@@ -940,7 +1089,9 @@ def cmd_collision_classify(args: argparse.Namespace) -> int:
     for i, name in enumerate(names):
         cfg = dataclasses.replace(base, observation=name)
         resume = args.resume if i == 0 else None
-        res = train_classifier(cfg, run_dir, progress=not args.quiet, samples=samples, resume=resume, queue=names[i + 1 :])
+        res = train_classifier(
+            cfg, run_dir, progress=not args.quiet, samples=samples, resume=resume, queue=names[i + 1 :]
+        )
         if res.interrupted:  # (it has said where it stopped and how to continue)
             interrupted = True
             break
@@ -961,7 +1112,7 @@ def cmd_collision_classify(args: argparse.Namespace) -> int:
     return 130 if interrupted else 0
 
 
-def _collision_resume_config(args: argparse.Namespace) -> tuple[Any, list[str]]:
+def _collision_resume_config(args: argparse.Namespace) -> tuple[CollisionConfig, list[str]]:
     """The configuration of the classifier ``--resume`` continues (options given replace its
     own) and the observations to train: that one, then those the run had still to train."""
     from .config import from_dict, given_options, replace_paths
@@ -970,7 +1121,9 @@ def _collision_resume_config(args: argparse.Namespace) -> tuple[Any, list[str]]:
 
     data = load_checkpoint(args.resume)
     if "collision_trainer" not in data:
-        raise CLIError(f"--resume {args.resume}: not the trainer state of a `pointplan collision-classify` run; resume from the run's last.pt")
+        raise CLIError(
+            f"--resume {args.resume}: not the trainer state of a `pointplan collision-classify` run; resume from the run's last.pt"
+        )
     cfg = replace_paths(from_dict(CollisionConfig, data["config"]), given_options(args, COLLISION_OPTIONS))
     return cfg, [cfg.observation, *data["collision_trainer"]["queue"]]
 
@@ -1012,7 +1165,9 @@ def cmd_mpnet_train(args: argparse.Namespace) -> int:
 
         data = load_checkpoint(args.resume)
         if "mpnet_trainer" not in data:
-            raise CLIError(f"--resume {args.resume}: not the trainer state of a `pointplan mpnet-train` run; resume from the run's last.pt")
+            raise CLIError(
+                f"--resume {args.resume}: not the trainer state of a `pointplan mpnet-train` run; resume from the run's last.pt"
+            )
         cfg = replace_paths(from_dict(MPNetTrainConfig, data["train_config"]), given_options(args, MPNET_OPTIONS))
     else:
         try:
@@ -1023,7 +1178,10 @@ def cmd_mpnet_train(args: argparse.Namespace) -> int:
     run_dir = _run_folder(args.run_dir or (Path(args.resume).parent if args.resume else "runs/mpnet"))
     res = train_mpnet(cfg, run_dir, progress=not args.quiet, pool=_demo_pool(cfg.workers, None), resume=args.resume)
     if res.interrupted:  # (it has said where it stopped and how to continue)
-        _write_json(args.json, {"run_dir": str(res.run_dir), "best_epoch": res.best_epoch, "best_val": res.best_val, "interrupted": True})
+        _write_json(
+            args.json,
+            {"run_dir": str(res.run_dir), "best_epoch": res.best_epoch, "best_val": res.best_val, "interrupted": True},
+        )
         return 130
     print(
         f"{_best_line(res.best_val.get('val_success'))} at epoch {res.best_epoch} "
@@ -1073,18 +1231,26 @@ def cmd_lsample_train(args: argparse.Namespace) -> int:
 
         data = load_checkpoint(args.resume)
         if "lsample_trainer" not in data:
-            raise CLIError(f"--resume {args.resume}: not the trainer state of a `pointplan lsample-train` run; resume from the run's last.pt")
+            raise CLIError(
+                f"--resume {args.resume}: not the trainer state of a `pointplan lsample-train` run; resume from the run's last.pt"
+            )
         cfg = replace_paths(from_dict(LSampleConfig, data["lsample_config"]), given_options(args, LSAMPLE_OPTIONS))
     else:
         cfg = replace_paths(LSampleConfig(), given_options(args, LSAMPLE_OPTIONS))
     run_dir = _run_folder(args.run_dir or (Path(args.resume).parent if args.resume else "runs/lsample"))
-    summary = train_lsample(cfg, run_dir, progress=not args.quiet, pool=_demo_pool(cfg.workers, None), resume=args.resume)
+    summary = train_lsample(
+        cfg, run_dir, progress=not args.quiet, pool=_demo_pool(cfg.workers, None), resume=args.resume
+    )
     if not summary["interrupted"]:  # (an interrupted run has said where it stopped and how to continue)
         best = summary["best_val_nodes_0.9"]
         print(
             f"trained on {summary['train_configs']} configurations of {summary['train_problems']} Bi-RRT solutions, {summary['epochs']} epochs, "
             f"{summary['train_time_s']:.0f} s (data {summary['data_time_s']:.0f} s); best epoch {summary['best_epoch']}"
-            + (f" ({best:.1f} mean nodes at lambda 0.9 on validation problems)" if best is not None else " (no planning validation)")
+            + (
+                f" ({best:.1f} mean nodes at lambda 0.9 on validation problems)"
+                if best is not None
+                else " (no planning validation)"
+            )
             + f"; checkpoints in {summary['run_dir']}"
         )
     _write_json(args.json, summary)
@@ -1147,14 +1313,22 @@ def cmd_ppo(args: argparse.Namespace) -> int:
         run_dir = args.run_dir or str(Path(args.resume).parent)
     else:
         if not given.get("init_actor"):
-            raise CLIError("--init-actor is required: PPO fine-tunes a policy checkpoint (e.g. runs/bc/bc.pt from `pointplan bc`, or a shipped one)")
+            raise CLIError(
+                "--init-actor is required: PPO fine-tunes a policy checkpoint (e.g. runs/bc/bc.pt from `pointplan bc`, or a shipped one)"
+            )
         cfg = replace_paths(PPOConfig(), given)
         run_dir = args.run_dir or "runs/ppo"
     summary = train_ppo(cfg, _run_folder(run_dir), resume=args.resume, progress=not args.quiet)
     if not summary["interrupted"]:
         steps = summary["steps"]
-        rounded = f" (--steps {cfg.total_steps} rounded up to a multiple of --num-envs {cfg.num_envs})" if steps > cfg.total_steps else ""
-        print(f"{_best_line(summary['best_success'])} after {steps} env steps{rounded}, {summary['wall_time_s']:.0f} s; checkpoints in {summary['run_dir']}")
+        rounded = (
+            f" (--steps {cfg.total_steps} rounded up to a multiple of --num-envs {cfg.num_envs})"
+            if steps > cfg.total_steps
+            else ""
+        )
+        print(
+            f"{_best_line(summary['best_success'])} after {steps} env steps{rounded}, {summary['wall_time_s']:.0f} s; checkpoints in {summary['run_dir']}"
+        )
     _write_json(args.json, summary)
     return 130 if summary["interrupted"] else 0
 
@@ -1176,20 +1350,53 @@ def cmd_convert_checkpoint(args: argparse.Namespace) -> int:
 
 def _add_net(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "--env", default="narrow2d", help="scenario to train on: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d (default: %(default)s)"
+        "--env",
+        default="narrow2d",
+        help="scenario to train on: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d (default: %(default)s)",
     )
     p.add_argument("--robot", help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot)")
-    p.add_argument("--observation", help="2D: surface, surface-normals (default), interior or image; 3D: global (default) or local")
+    p.add_argument(
+        "--observation", help="2D: surface, surface-normals (default), interior or image; 3D: global (default) or local"
+    )
     p.add_argument("--n-points", type=positive_int, help="observed points (default: 256 for global, else 64)")
-    p.add_argument("--encoder", default="pointnet", help="pointnet, mlp or cnn (use cnn with --observation image) (default: %(default)s)")
-    p.add_argument("--width", type=positive_int, default=64, help="layer width of encoder and head (default: %(default)s)")
-    p.add_argument("--layers", type=positive_int, default=3, help="layers of the per-point encoder and of the head (default: %(default)s)")
-    p.add_argument("--encoder-sharing", choices=["shared", "separate"], default="shared", help="one encoder for actor and critics, or one each")
-    p.add_argument("--critic-action", choices=["points", "pooled"], help="where the critic sees the action (default: pooled if shared, else points)")
-    p.add_argument("--paper", action="store_true", help="the paper's networks: 3 x 256, separate encoders, action on every point")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="seeds the problems, the networks and the validation set (default: %(default)s)")
+    p.add_argument(
+        "--encoder",
+        default="pointnet",
+        help="pointnet, mlp or cnn (use cnn with --observation image) (default: %(default)s)",
+    )
+    p.add_argument(
+        "--width", type=positive_int, default=64, help="layer width of encoder and head (default: %(default)s)"
+    )
+    p.add_argument(
+        "--layers",
+        type=positive_int,
+        default=3,
+        help="layers of the per-point encoder and of the head (default: %(default)s)",
+    )
+    p.add_argument(
+        "--encoder-sharing",
+        choices=["shared", "separate"],
+        default="shared",
+        help="one encoder for actor and critics, or one each",
+    )
+    p.add_argument(
+        "--critic-action",
+        choices=["points", "pooled"],
+        help="where the critic sees the action (default: pooled if shared, else points)",
+    )
+    p.add_argument(
+        "--paper", action="store_true", help="the paper's networks: 3 x 256, separate encoders, action on every point"
+    )
+    p.add_argument(
+        "--seed",
+        type=non_negative_int,
+        default=0,
+        help="seeds the problems, the networks and the validation set (default: %(default)s)",
+    )
     p.add_argument("--device", default="cpu", help="cpu or cuda (default: %(default)s)")
-    p.add_argument("--run-dir", help="where checkpoints and logs go (default: runs/latest; with --resume the checkpoint's folder)")
+    p.add_argument(
+        "--run-dir", help="where checkpoints and logs go (default: runs/latest; with --resume the checkpoint's folder)"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -1200,7 +1407,10 @@ def _add_scale(p: argparse.ArgumentParser, what: str = "problems are planned by"
         default=None,
         help=f"{what} this many Ray workers on this machine (pip install 'pointplan[ray]'; default: one process); results equal a serial run's",
     )
-    p.add_argument("--address", help="an existing Ray cluster to run the workers on (e.g. auto, or ray://head:10001; see docs/scaling.md)")
+    p.add_argument(
+        "--address",
+        help="an existing Ray cluster to run the workers on (e.g. auto, or ray://head:10001; see docs/scaling.md)",
+    )
 
 
 CLAIMS_EPILOG = (
@@ -1213,14 +1423,18 @@ CLAIMS_EPILOG = (
 )
 
 
-def _subparser(sub: Any, name: str, text: str, **kw: Any) -> argparse.ArgumentParser:
+def _subparser(
+    sub: _SubParsersAction[argparse.ArgumentParser], name: str, text: str, **kw: Any
+) -> argparse.ArgumentParser:
     """A subcommand with ``text`` as both its one-line help and its description."""
     p: argparse.ArgumentParser = sub.add_parser(name, help=text, description=text[:1].upper() + text[1:] + ".", **kw)
     return p
 
 
-def _add_eval_parser(sub: Any) -> None:
-    p = _subparser(sub, "eval", "run planners on a seeded set of test problems and print their metrics", epilog=CLAIMS_EPILOG)
+def _add_eval_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = _subparser(
+        sub, "eval", "run planners on a seeded set of test problems and print their metrics", epilog=CLAIMS_EPILOG
+    )
     _add_common(p)
     p.add_argument("--episodes", type=positive_int, default=400, help="number of test problems (default: %(default)s)")
     p.add_argument("--json", help="write the metrics to this file")
@@ -1229,31 +1443,49 @@ def _add_eval_parser(sub: Any) -> None:
     p.set_defaults(func=cmd_eval)
 
 
-def _add_render_parser(sub: Any) -> None:
+def _add_render_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
     p = _subparser(sub, "render", "draw a test problem, what the robot observes and a planner's path to a PNG")
     _add_common(p)
     p.add_argument(
-        "--n-points", type=positive_int, help="observed points drawn (default: the policy's with --planner policy or hybrid; else 64, 256 for global)"
+        "--n-points",
+        type=positive_int,
+        help="observed points drawn (default: the policy's with --planner policy or hybrid; else 64, 256 for global)",
     )
     p.add_argument("-o", "--output", default="render.png", help="PNG file (default: %(default)s)")
     p.add_argument("--gif", help="3D: also write an animation of the path, one frame per time step")
     p.set_defaults(func=cmd_render)
 
 
-def _add_view_parser(sub: Any) -> None:
-    p = _subparser(sub, "view", "show a 3D test problem and a planner's path in the browser (pip install 'pointplan[viewer]')")
+def _add_view_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = _subparser(
+        sub, "view", "show a 3D test problem and a planner's path in the browser (pip install 'pointplan[viewer]')"
+    )
     _add_common(p)
-    p.add_argument("--n-points", type=positive_int, help="observed points shown with --observation (default: the observer's, 256 for global)")
+    p.add_argument(
+        "--n-points",
+        type=positive_int,
+        help="observed points shown with --observation (default: the observer's, 256 for global)",
+    )
     p.add_argument("--port", type=int, default=8080, help="port to serve on (default: %(default)s)")
-    p.add_argument("--host", default="127.0.0.1", help="address to listen on; 0.0.0.0 to serve other machines (default: %(default)s)")
+    p.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to listen on; 0.0.0.0 to serve other machines (default: %(default)s)",
+    )
     p.set_defaults(func=cmd_view)
 
 
-def _add_plan_parser(sub: Any) -> None:
-    p = _subparser(sub, "plan", "plan the problems of a scene file or of a point cloud file (or test problems of --env)", epilog=CLAIMS_EPILOG)
+def _add_plan_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = _subparser(
+        sub,
+        "plan",
+        "plan the problems of a scene file or of a point cloud file (or test problems of --env)",
+        epilog=CLAIMS_EPILOG,
+    )
     _add_common(p)
     p.add_argument(
-        "--points", help="plan among the points of a cloud file (.ply, .pcd, .npy, .xyz, .txt, .csv; normals estimated if it has none) instead of a scene file"
+        "--points",
+        help="plan among the points of a cloud file (.ply, .pcd, .npy, .xyz, .txt, .csv; normals estimated if it has none) instead of a scene file",
     )
     p.add_argument(
         "--bounds",
@@ -1267,21 +1499,30 @@ def _add_plan_parser(sub: Any) -> None:
         default=10,
         help="problems to draw when the scene file has none; in 2D, starts and goals in regions a point cloud encloses (inside a scanned outline) are drawn again, in 3D they are not checked (default: %(default)s)",
     )
-    p.add_argument("-o", "--output", help="draw the problems and their paths to this PNG (a grid when there are several)")
+    p.add_argument(
+        "-o", "--output", help="draw the problems and their paths to this PNG (a grid when there are several)"
+    )
     p.add_argument("--json", help="write metrics and paths to this file")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_scale(p)
     p.set_defaults(func=cmd_plan)
 
 
-def _add_train_parser(sub: Any) -> None:
+def _add_train_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
     from .config import add_config_options
     from .learning.train import TrainConfig
 
-    p = _subparser(sub, "train", "train a policy with SAC + HER (checkpoints best.pt and last.pt, metrics.csv and TensorBoard logs in --run-dir)")
+    p = _subparser(
+        sub,
+        "train",
+        "train a policy with SAC + HER (checkpoints best.pt and last.pt, metrics.csv and TensorBoard logs in --run-dir)",
+    )
     _add_net(p)
     add_config_options(p, TrainConfig(), TRAIN_OPTIONS)
-    p.add_argument("--resume", help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own")
+    p.add_argument(
+        "--resume",
+        help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own",
+    )
     p.add_argument(
         "--workers",
         type=positive_int,
@@ -1289,12 +1530,16 @@ def _add_train_parser(sub: Any) -> None:
         help="Ray rollout workers stepping the --num-envs environments (shared out among them) while this process learns (pip install 'pointplan[ray]'; default: one process)",
     )
     p.add_argument("--address", help="an existing Ray cluster to run the rollout workers on (see docs/scaling.md)")
-    p.add_argument("--sync-every", type=positive_int, help="with --workers: learner updates between two broadcasts of the actor's weights (default: 16)")
+    p.add_argument(
+        "--sync-every",
+        type=positive_int,
+        help="with --workers: learner updates between two broadcasts of the actor's weights (default: 16)",
+    )
     p.add_argument("--json", help="also write the summary (best success, steps, time, run folder) to this JSON file")
     p.set_defaults(func=cmd_train)
 
 
-def _add_bc_parser(sub: Any) -> None:
+def _add_bc_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
     from .config import add_config_options
     from .learning.dagger import DaggerConfig
 
@@ -1310,14 +1555,20 @@ def _add_bc_parser(sub: Any) -> None:
     )
     p.add_argument("--init-actor", help="DAgger: start from this checkpoint's actor instead of cloning first")
     p.add_argument(
-        "--resume", help="continue a cloning or DAgger run from its last.pt (DAgger: --dagger-rounds sets the new total); options given replace the run's own"
+        "--resume",
+        help="continue a cloning or DAgger run from its last.pt (DAgger: --dagger-rounds sets the new total); options given replace the run's own",
     )
     p.add_argument("--json", help="also write the summary to this JSON file")
     p.set_defaults(func=cmd_bc)
 
 
-def _add_demo_parser(sub: Any) -> None:
-    p = _subparser(sub, "demo", "the shipped policy next to Bi-RRT and the straight line on test problems, with pictures", epilog=CLAIMS_EPILOG)
+def _add_demo_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = _subparser(
+        sub,
+        "demo",
+        "the shipped policy next to Bi-RRT and the straight line on test problems, with pictures",
+        epilog=CLAIMS_EPILOG,
+    )
     _add_common(p)
     p.add_argument("--episodes", type=positive_int, help="test problems (default: 400 in 2D, 100 in 3D)")
     p.add_argument("--figures", type=positive_int, default=8, help="problems drawn (default: %(default)s)")
@@ -1326,7 +1577,7 @@ def _add_demo_parser(sub: Any) -> None:
     p.set_defaults(func=cmd_demo)
 
 
-def _add_collision_parser(sub: Any) -> None:
+def _add_collision_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
     from .config import add_config_options
     from .learning.collision import CollisionConfig
 
@@ -1345,14 +1596,17 @@ def _add_collision_parser(sub: Any) -> None:
         "--run-dir",
         help="where the classifiers (<observation>.pt), summaries and test predictions go (default: runs/collision; with --resume the checkpoint's folder)",
     )
-    p.add_argument("--resume", help="continue an interrupted run from its last.pt, then the observations it had still to train; options given replace its own")
+    p.add_argument(
+        "--resume",
+        help="continue an interrupted run from its last.pt, then the observations it had still to train; options given replace its own",
+    )
     p.add_argument("--figure", help="draw where each classifier is wrong (a PNG) after training")
     p.add_argument("--json", help="write the results here")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_collision_classify)
 
 
-def _add_mpnet_parser(sub: Any) -> None:
+def _add_mpnet_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
     from .config import add_config_options
     from .learning.mpnet import MPNetTrainConfig
 
@@ -1362,18 +1616,28 @@ def _add_mpnet_parser(sub: Any) -> None:
         "train MPNet (mpnet-nr, mpnet-hr) on Bi-RRT paths of training problems; model selection on validation problems, one test at the end (best.pt, last.pt, metrics.csv, summary.json in --run-dir)",
     )
     p.add_argument(
-        "--env", default="narrow2d", help="scenario to train on: narrow2d (the disc) or a 3D scenario with the sphere, e.g. boxes3d (default: %(default)s)"
+        "--env",
+        default="narrow2d",
+        help="scenario to train on: narrow2d (the disc) or a 3D scenario with the sphere, e.g. boxes3d (default: %(default)s)",
     )
-    p.add_argument("--robot", help="sphere3d for the 3D scenarios (the default there; MPNet plans translating robots only, not sshape)")
+    p.add_argument(
+        "--robot",
+        help="sphere3d for the 3D scenarios (the default there; MPNet plans translating robots only, not sshape)",
+    )
     add_config_options(p, MPNetTrainConfig(), MPNET_OPTIONS)
-    p.add_argument("--run-dir", help="where checkpoints and logs go (default: runs/mpnet; with --resume the checkpoint's folder)")
-    p.add_argument("--resume", help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own")
+    p.add_argument(
+        "--run-dir", help="where checkpoints and logs go (default: runs/mpnet; with --resume the checkpoint's folder)"
+    )
+    p.add_argument(
+        "--resume",
+        help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own",
+    )
     p.add_argument("--json", help="also write the summary to this JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_mpnet_train)
 
 
-def _add_lsample_parser(sub: Any) -> None:
+def _add_lsample_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
     from .config import add_config_options
     from .learning.lsample import LSampleConfig
 
@@ -1383,14 +1647,20 @@ def _add_lsample_parser(sub: Any) -> None:
         "train the learned sampler of --planner lsample-0.5 / lsample-0.9 (Ichter et al. 2018): a conditional VAE on configurations of Bi-RRT solutions of training problems",
     )
     add_config_options(p, LSampleConfig(), LSAMPLE_OPTIONS)
-    p.add_argument("--run-dir", help="where best.pt, last.pt and metrics.csv go (default: runs/lsample; with --resume the checkpoint's folder)")
-    p.add_argument("--resume", help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own")
+    p.add_argument(
+        "--run-dir",
+        help="where best.pt, last.pt and metrics.csv go (default: runs/lsample; with --resume the checkpoint's folder)",
+    )
+    p.add_argument(
+        "--resume",
+        help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own",
+    )
     p.add_argument("--json", help="also write the summary to this JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_lsample_train)
 
 
-def _add_ppo_parser(sub: Any) -> None:
+def _add_ppo_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
     from .config import add_config_options
     from .learning.ppo import PPOConfig
 
@@ -1400,16 +1670,29 @@ def _add_ppo_parser(sub: Any) -> None:
         "fine-tune a policy (e.g. a cloned one) with PPO on its own sampled rollouts (checkpoints best.pt and last.pt, metrics.csv in --run-dir)",
     )
     add_config_options(p, PPOConfig(), PPO_OPTIONS)
-    p.add_argument("--resume", help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own")
-    p.add_argument("--run-dir", help="where checkpoints and logs go (default: runs/ppo; with --resume the checkpoint's folder)")
-    p.add_argument("--threads", type=positive_int, help="PyTorch threads (default: PyTorch's; 1 per job when several share the cores)")
+    p.add_argument(
+        "--resume",
+        help="continue a run from its last.pt (into the same folder unless --run-dir is given); options given replace the run's own",
+    )
+    p.add_argument(
+        "--run-dir", help="where checkpoints and logs go (default: runs/ppo; with --resume the checkpoint's folder)"
+    )
+    p.add_argument(
+        "--threads",
+        type=positive_int,
+        help="PyTorch threads (default: PyTorch's; 1 per job when several share the cores)",
+    )
     p.add_argument("--json", help="also write the summary to this JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_ppo)
 
 
-def _add_convert_parser(sub: Any) -> None:
-    p = _subparser(sub, "convert-checkpoint", "rewrite an older checkpoint holding pickled objects as a data-only one (unpickles OLD: trusted files only)")
+def _add_convert_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = _subparser(
+        sub,
+        "convert-checkpoint",
+        "rewrite an older checkpoint holding pickled objects as a data-only one (unpickles OLD: trusted files only)",
+    )
     p.add_argument("old", help="the checkpoint to convert; it is fully unpickled, which can run code")
     p.add_argument("new", help="where the data-only checkpoint goes")
     p.set_defaults(func=cmd_convert_checkpoint)

@@ -106,7 +106,9 @@ def _at_least(kind: type, low: float) -> Any:
         try:
             value = kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, got {text!r}") from None
+            raise argparse.ArgumentTypeError(
+                f"expected {'an integer' if kind is int else 'a number'}, got {text!r}"
+            ) from None
         if value < low:
             raise argparse.ArgumentTypeError(f"must be at least {kind(low)}, got {value}")
         return value
@@ -138,7 +140,9 @@ def add_config_options(parser: argparse.ArgumentParser, defaults: Any, paths: di
         else:
             choices = meta.get("choices")
             metavar = "{" + ",".join(choices) + "}" if choices else flag.upper().replace("-", "_")
-            parser.add_argument(f"--{flag}", dest=path, type=parse, default=None, choices=choices, metavar=metavar, help=text)
+            parser.add_argument(
+                f"--{flag}", dest=path, type=parse, default=None, choices=choices, metavar=metavar, help=text
+            )
 
 
 def given_options(args: argparse.Namespace, paths: dict[str, str]) -> dict[str, Any]:

@@ -30,7 +30,12 @@ class WorkerPool(Protocol):
     """Runs a module-level function over items on workers, results in item order."""
 
     def map(
-        self, fn: Callable[..., Any], items: Sequence[Any], *, shared: Sequence[Any] = (), on_result: Callable[[int, Any], None] | None = None
+        self,
+        fn: Callable[..., Any],
+        items: Sequence[Any],
+        *,
+        shared: Sequence[Any] = (),
+        on_result: Callable[[int, Any], None] | None = None,
     ) -> list[Any]:
         """``[fn(item, *shared) for item in items]``; ``on_result(position, result)`` as
         results arrive. Ctrl-C raises :class:`Interrupted` with the finished results."""
@@ -65,7 +70,9 @@ class Backend(Protocol):
 
     def pool(self, workers: int | None, address: str | None) -> WorkerPool: ...
 
-    def rollouts(self, workers: int | None, address: str | None, sync_every: int | None) -> Callable[[Any], RolloutSource]:
+    def rollouts(
+        self, workers: int | None, address: str | None, sync_every: int | None
+    ) -> Callable[[Any], RolloutSource]:
         """A factory of rollout sources for a training config."""
         ...
 
@@ -82,5 +89,7 @@ def set_backend(loader: Callable[[], Backend] | None) -> None:
 def backend() -> Backend:
     """The default back end (raises ``RuntimeError`` when none is installed)."""
     if _backend is None:
-        raise RuntimeError("no worker back end is installed: pass a pool (e.g. pointplan.distributed.RayPool) or run in one process")
+        raise RuntimeError(
+            "no worker back end is installed: pass a pool (e.g. pointplan.distributed.RayPool) or run in one process"
+        )
     return _backend()

@@ -33,7 +33,10 @@ import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from argparse import _SubParsersAction
 
 #: ``{FULL|SMOKE}``: a budget at full size and in a smoke run
 _BUDGET = re.compile(r"\{([^{}|]*)\|([^{}|]*)\}")
@@ -433,7 +436,9 @@ def _say(message: str) -> None:
     print(message, flush=True)
 
 
-def run(name: str, root: str | Path | None = None, smoke: bool = False, dry_run: bool = False, from_step: int = 1) -> int:
+def run(
+    name: str, root: str | Path | None = None, smoke: bool = False, dry_run: bool = False, from_step: int = 1
+) -> int:
     """Run recipe ``name``'s steps in order (from step ``from_step``, counted from 1) with
     its runs under ``root``, then copy the final checkpoint to ``root/<shipped name>``.
     ``smoke`` swaps the budgets for tiny ones; ``dry_run`` prints the commands instead.
@@ -450,7 +455,9 @@ def run(name: str, root: str | Path | None = None, smoke: bool = False, dry_run:
     final = root / recipe.shipped
     if dry_run:
         _say(f"# {recipe.name}: rebuilds {recipe.shipped}{' (smoke scale)' if smoke else ''}; full size: {recipe.cost}")
-        _say(textwrap.fill(recipe.description, 100, initial_indent="# ", subsequent_indent="# ", break_on_hyphens=False))
+        _say(
+            textwrap.fill(recipe.description, 100, initial_indent="# ", subsequent_indent="# ", break_on_hyphens=False)
+        )
         for i, (step, argv) in enumerate(zip(recipe.steps, lines), 1):
             if i >= from_step:
                 _say(f"# {i}. {step.note}" if step.note else f"# {i}.")
@@ -478,7 +485,10 @@ def run(name: str, root: str | Path | None = None, smoke: bool = False, dry_run:
             return code
     product = next((root / p for p in recipe.product if (root / p).is_file()), None)
     if product is None:
-        print(f"recipe {name}: its steps finished but left none of {', '.join(str(root / p) for p in recipe.product)}", file=sys.stderr)
+        print(
+            f"recipe {name}: its steps finished but left none of {', '.join(str(root / p) for p in recipe.product)}",
+            file=sys.stderr,
+        )
         return 1
     shutil.copyfile(product, final)
     _say(f"recipe {name}: {final} (from {product}){'; a smoke run, its weights are not for use' if smoke else ''}")
@@ -501,8 +511,15 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--list", action="store_true", help="list the recipes, what each rebuilds and its full-size cost")
     p.add_argument("--root", help="folder for the recipe's runs and the rebuilt file (default: runs/recipes/NAME)")
     p.add_argument("--dry-run", action="store_true", help="print the commands instead of running them")
-    p.add_argument("--smoke", action="store_true", help="tiny budgets (steps, epochs, problems, episodes): every stage in seconds")
-    p.add_argument("--from-step", type=int, default=1, help="start at this step (counted from 1), e.g. after a failure (default: %(default)s)")
+    p.add_argument(
+        "--smoke", action="store_true", help="tiny budgets (steps, epochs, problems, episodes): every stage in seconds"
+    )
+    p.add_argument(
+        "--from-step",
+        type=int,
+        default=1,
+        help="start at this step (counted from 1), e.g. after a failure (default: %(default)s)",
+    )
     p.set_defaults(func=_command)
 
 
@@ -516,9 +533,11 @@ def _command(args: argparse.Namespace) -> int:
     return run(args.name, args.root, smoke=args.smoke, dry_run=args.dry_run, from_step=args.from_step)
 
 
-def add_parser(sub: Any) -> argparse.ArgumentParser:
+def add_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     """Register the ``recipe`` subcommand on ``sub`` (an argparse subparsers object)."""
-    text = "rebuild a shipped checkpoint from nothing with the commands that trained it (list, dry-run, smoke-run or run)"
+    text = (
+        "rebuild a shipped checkpoint from nothing with the commands that trained it (list, dry-run, smoke-run or run)"
+    )
     p: argparse.ArgumentParser = sub.add_parser("recipe", help=text, description=text[:1].upper() + text[1:] + ".")
     _add_arguments(p)
     return p
@@ -526,7 +545,9 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m pointplan.recipes NAME [--dry-run | --smoke] [--root DIR]``."""
-    p = argparse.ArgumentParser(prog="python -m pointplan.recipes", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        prog="python -m pointplan.recipes", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     _add_arguments(p)
     args = p.parse_args(argv)
     return int(args.func(args))

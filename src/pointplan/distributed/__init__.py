@@ -31,10 +31,26 @@ Ctrl-C cancels the tasks still running and keeps the finished results
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING
 
 from .evaluation import ScenarioProblems, evaluate_parallel
-from .tasks import RAY_MISSING, TASK_RETRIES, Interrupted, NoCluster, RayMissing, RayPool, cluster_cpus, connect, map_ordered, ray_available, wants_ray
+from .tasks import (
+    RAY_MISSING,
+    TASK_RETRIES,
+    Interrupted,
+    NoCluster,
+    RayMissing,
+    RayPool,
+    cluster_cpus,
+    connect,
+    map_ordered,
+    ray_available,
+    wants_ray,
+)
+
+if TYPE_CHECKING:
+    from ..learning.train import TrainConfig
+    from .rollouts import RayRollouts
 
 
 class RayBackend:
@@ -46,7 +62,9 @@ class RayBackend:
     def pool(self, workers: int | None, address: str | None) -> RayPool:
         return RayPool(workers, address)
 
-    def rollouts(self, workers: int | None, address: str | None, sync_every: int | None) -> Callable[[Any], Any]:
+    def rollouts(
+        self, workers: int | None, address: str | None, sync_every: int | None
+    ) -> Callable[[TrainConfig], RayRollouts]:
         from .rollouts import ray_rollouts
 
         return ray_rollouts(workers, address, sync_every)

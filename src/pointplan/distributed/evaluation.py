@@ -6,7 +6,9 @@ from collections.abc import Sequence
 from typing import Any, overload
 
 from ..evaluation.evaluate import EvalReport, evaluate, set_call_number
+from ..planners.base import Planner
 from ..robots.base import Robot
+from ..scenes.base import Scenario
 from ..scenes.scene import Problem
 from .tasks import RayPool
 
@@ -21,11 +23,11 @@ class ScenarioProblems(Sequence[Problem]):
 
     def __init__(self, env: str, robot: str | None, split: str, n: int, seed: int = 0) -> None:
         self.env, self.robot, self.split, self.n, self.seed = env, robot, split, int(n), int(seed)
-        self._scenario: Any = None
+        self._scenario: Scenario | None = None
         self._built: dict[int, Problem] = {}
 
     @classmethod
-    def of(cls, scenario: Any, split: str, n: int, seed: int = 0) -> ScenarioProblems:
+    def of(cls, scenario: Scenario, split: str, n: int, seed: int = 0) -> ScenarioProblems:
         """The problems of a registered ``scenario`` (one :func:`make_scenario` builds)."""
         robot = scenario.robot.name if scenario.robot.dim == 3 else None
         return cls(scenario.name, robot, split, n, seed)
@@ -62,7 +64,7 @@ class ScenarioProblems(Sequence[Problem]):
 
 
 def evaluate_parallel(
-    planner: Any,
+    planner: Planner,
     problems: Sequence[Problem],
     robot: Robot,
     progress: bool = True,

@@ -20,12 +20,16 @@ episodes it had under way are lost, which only costs time.
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ..learning.train import TrainConfig
 
 #: lockstep steps per call of a worker (each of its environments takes this many)
 STEPS_PER_CALL = 10
@@ -51,7 +55,11 @@ class RolloutWorker:
         self.cfg = c = from_dict(TrainConfig, cfg)
         scenario = make_scenario(c.env, robot=c.robot)
         self.robot = scenario.robot
-        self.core = BatchedCore(scenario, num_envs, EnvConfig(observation=c.observation, n_points=c.n_points, split="train", action_cost=c.action_cost))
+        self.core = BatchedCore(
+            scenario,
+            num_envs,
+            EnvConfig(observation=c.observation, n_points=c.n_points, split="train", action_cost=c.action_cost),
+        )
         self.rng = np.random.default_rng(np.random.SeedSequence([c.seed, 0x524159, index]))
         torch.manual_seed(int(self.rng.integers(2**31)))
         obs_shape = tuple(self.core.observer.space.shape)
@@ -60,7 +68,9 @@ class RolloutWorker:
         self.source = EpisodeSource(self.core, None, 0.0)
         self.source.reset(range(num_envs), self.rng)
         self.obs = self.core.observe(self.rng)["observation"]
-        self.staging = EpisodeStaging(num_envs, self.core.horizon, obs_shape, self.robot.config_dim, self.robot.twist_dim)
+        self.staging = EpisodeStaging(
+            num_envs, self.core.horizon, obs_shape, self.robot.config_dim, self.robot.twist_dim
+        )
 
     def _act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
         import torch
@@ -72,7 +82,9 @@ class RolloutWorker:
             g = torch.as_tensor(np.asarray(goal_input(self.robot, q, goal), np.float32))
             return self.actor.sample(o, g)[0].numpy()
 
-    def collect(self, weights: Any, version: int, n_steps: int, random_actions: bool) -> tuple[list[tuple[np.ndarray, ...]], list[float], int]:
+    def collect(
+        self, weights: Any, version: int, n_steps: int, random_actions: bool
+    ) -> tuple[list[tuple[np.ndarray, ...]], list[float], int]:
         """Step every environment ``n_steps`` times (uniform random actions, or the actor
         with ``weights``, loaded if ``version`` is new); returns the episodes that ended
         (arrays in the order of ``EpisodeReplay.add_episode``), their success, and the
@@ -126,7 +138,14 @@ class RayRollouts:
     trainer validates and saves its checkpoints one last time, and :meth:`close` stops the
     workers; a second Ctrl-C interrupts at once."""
 
-    def __init__(self, cfg: Any, workers: int | None, address: str | None, sync_every: int = SYNC_EVERY, steps_per_call: int = STEPS_PER_CALL) -> None:
+    def __init__(
+        self,
+        cfg: TrainConfig,
+        workers: int | None,
+        address: str | None,
+        sync_every: int = SYNC_EVERY,
+        steps_per_call: int = STEPS_PER_CALL,
+    ) -> None:
         from ..models.checkpoint import to_dict
         from .tasks import cluster_cpus, connect
 
@@ -164,7 +183,10 @@ class RayRollouts:
         if self.interrupted:
             raise KeyboardInterrupt
         self.interrupted = True
-        print("\ninterrupted: stopping the rollout workers after a last validation and checkpoint (Ctrl-C again to stop now)", file=sys.stderr)
+        print(
+            "\ninterrupted: stopping the rollout workers after a last validation and checkpoint (Ctrl-C again to stop now)",
+            file=sys.stderr,
+        )
 
     def sync(self, actor: Any, updates: int) -> None:
         """Publish ``actor``'s weights if ``sync_every`` updates have passed since the last."""
@@ -204,21 +226,21 @@ class RayRollouts:
         """Stop the workers (the learner keeps what it has)."""
         self.inflight.clear()
         for w in self.workers:
-            try:
+            with contextlib.suppress(Exception):
                 self.ray.kill(w)
-            except Exception:
-                pass
         self.workers = []
         if self._old_handler is not None:
             signal.signal(signal.SIGINT, self._old_handler)
             self._old_handler = None
 
 
-def ray_rollouts(workers: int | None, address: str | None, sync_every: int | None = None) -> Callable[[Any], RayRollouts]:
+def ray_rollouts(
+    workers: int | None, address: str | None, sync_every: int | None = None
+) -> Callable[[TrainConfig], RayRollouts]:
     """The ``rollouts`` factory :func:`pointplan.learning.train.train` takes: Ray rollout
     workers on this machine (``workers``) or a cluster (``address``)."""
 
-    def start(cfg: Any) -> RayRollouts:
+    def start(cfg: TrainConfig) -> RayRollouts:
         return RayRollouts(cfg, workers, address, sync_every or SYNC_EVERY)
 
     return start

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import math
 import os
@@ -166,10 +167,8 @@ def map_ordered(
                         on_result(pos, value)
     except KeyboardInterrupt:
         for ref in pending:
-            try:
+            with contextlib.suppress(Exception):  # (a task that already finished)
                 ray.cancel(ref, force=True)
-            except Exception:  # pragma: no cover - already finished
-                pass
         raise Interrupted(results, n) from None
     return [results[i] for i in range(n)]
 
@@ -203,7 +202,9 @@ class RayPool:
     ) -> list[Any]:
         # ``chunksize`` is accepted for the process pool's signature; chunks are sized by
         # map_ordered (small enough to balance problems of very different costs)
-        return map_ordered(fn, list(items), workers=self.workers, address=self.address, shared=shared, on_result=on_result)
+        return map_ordered(
+            fn, list(items), workers=self.workers, address=self.address, shared=shared, on_result=on_result
+        )
 
     def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:
         return None

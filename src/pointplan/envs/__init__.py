@@ -51,4 +51,15 @@ def register_envs() -> None:
         )
 
 
-__all__ = ["ENV_IDS", "BatchedCore", "EnvConfig", "PlanningEnv", "PlanningVectorEnv", "make_env", "make_vector_env", "q_free", "register_envs", "set_renderer"]
+__all__ = [
+    "ENV_IDS",
+    "BatchedCore",
+    "EnvConfig",
+    "PlanningEnv",
+    "PlanningVectorEnv",
+    "make_env",
+    "make_vector_env",
+    "q_free",
+    "register_envs",
+    "set_renderer",
+]

@@ -106,7 +106,9 @@ def q_free(
     return new_q, chk.collided, chk.checks
 
 
-def goal_reached(robot: Robot, config: EnvConfig, achieved: Array, desired: Array, collided: Bool | None = None) -> Bool:
+def goal_reached(
+    robot: Robot, config: EnvConfig, achieved: Array, desired: Array, collided: Bool | None = None
+) -> Bool:
     """The success rule: within the goal tolerance of ``desired`` (in a step that did not
     collide, when ``collided`` is given)."""
     ok = robot.distance(achieved, desired) < config.goal_tolerance
@@ -116,7 +118,11 @@ def goal_reached(robot: Robot, config: EnvConfig, achieved: Array, desired: Arra
 def step_reward(config: EnvConfig, action_norm: Array, collided: Bool, success: Bool) -> Array:
     """The reward rule: ``-action_cost |a| + (free | collided penalty) + success bonus``."""
     c = config
-    return -c.action_cost * np.asarray(action_norm) + np.where(collided, c.reward_collision, c.reward_free) + c.reward_success * success
+    return (
+        -c.action_cost * np.asarray(action_norm)
+        + np.where(collided, c.reward_collision, c.reward_free)
+        + c.reward_success * success
+    )
 
 
 class BatchedCore:
@@ -146,7 +152,9 @@ class BatchedCore:
         self._world: CollisionWorld | None = None
 
     # ------------------------------------------------------------------ resets
-    def reset_envs(self, idx: Sequence[int], rng: np.random.Generator, problems: Sequence[Problem | None] | None = None) -> None:
+    def reset_envs(
+        self, idx: Sequence[int], rng: np.random.Generator, problems: Sequence[Problem | None] | None = None
+    ) -> None:
         """Start new episodes in environments ``idx``: a new workspace and problem each,
         drawn from ``rng``, or the given problems."""
         for j, i in enumerate(idx):
@@ -211,7 +219,16 @@ class BatchedCore:
         twist = a * self.robot.action_scale
         # a move from step t to t + 1 is checked against the obstacles at t + 1
         world = self.world_at(self.t + 1)
-        self.q, collided, checks = q_free(self.robot, world, self.q, twist, self.low, self.high, self.config.substep, clip_target=self.config.bounds == "clip")
+        self.q, collided, checks = q_free(
+            self.robot,
+            world,
+            self.q,
+            twist,
+            self.low,
+            self.high,
+            self.config.substep,
+            clip_target=self.config.bounds == "clip",
+        )
         crushed = np.zeros(self.num_envs, dtype=bool)
         if world is not self._world:  # moving obstacles: one may have run into the robot
             crushed = self.robot.collides(world, self.q[:, None])[:, 0]
@@ -222,5 +239,11 @@ class BatchedCore:
         reward = self.reward(action_norm, collided, success)
         # an obstacle that ran into the robot ends the episode, as a failure
         truncated = ((self.t >= self.horizon) | crushed) & ~success
-        info = {"collided": collided, "crushed": crushed, "is_success": success, "action_norm": action_norm, "collision_checks": checks}
+        info = {
+            "collided": collided,
+            "crushed": crushed,
+            "is_success": success,
+            "action_norm": action_norm,
+            "collision_checks": checks,
+        }
         return reward, success, truncated, info

@@ -76,13 +76,23 @@ class PlanningEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, scenario: str | Scenario = "narrow2d", render_mode: str | None = None, robot: str | None = None, **settings: Any) -> None:
+    def __init__(
+        self,
+        scenario: str | Scenario = "narrow2d",
+        render_mode: str | None = None,
+        robot: str | None = None,
+        **settings: Any,
+    ) -> None:
         self.config = EnvConfig(**settings)
         self.core = BatchedCore(_resolve(scenario, robot), 1, self.config)
         self.robot = self.core.robot
         self.render_mode = render_mode
         self.observation_space = spaces.Dict(  # type: ignore[assignment]  # (gymnasium's Dict is not generic in its value type)
-            {"observation": self.core.observer.space, "achieved_goal": _goal_space(self.core), "desired_goal": _goal_space(self.core)}
+            {
+                "observation": self.core.observer.space,
+                "achieved_goal": _goal_space(self.core),
+                "desired_goal": _goal_space(self.core),
+            }
         )
         k = self.robot.twist_dim
         self.action_space = spaces.Box(-1.0, 1.0, shape=(k,), dtype=np.float32)
@@ -97,13 +107,17 @@ class PlanningEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
     def _obs(self) -> dict[str, NDArray[np.float32]]:
         return {k: v[0] for k, v in self.core.observe(self.np_random).items()}
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
         super().reset(seed=seed)  # seeds self.np_random, the env's one generator
         problem = (options or {}).get("problem")
         self.core.reset_envs([0], self.np_random, [problem] if problem is not None else None)
         return self._obs(), {}
 
-    def step(self, action: NDArray[np.float32]) -> tuple[dict[str, NDArray[np.float32]], float, bool, bool, dict[str, Any]]:
+    def step(
+        self, action: NDArray[np.float32]
+    ) -> tuple[dict[str, NDArray[np.float32]], float, bool, bool, dict[str, Any]]:
         reward, term, trunc, info = self.core.step(np.asarray(action)[None])
         one = {k: (v[0].item() if isinstance(v[0], np.generic) else v[0]) for k, v in info.items()}
         return self._obs(), float(reward[0]), bool(term[0]), bool(trunc[0]), one
@@ -138,19 +152,27 @@ class PlanningVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.flo
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
 
-    def __init__(self, scenario: str | Scenario = "narrow2d", num_envs: int = 16, robot: str | None = None, **settings: Any) -> None:
+    def __init__(
+        self, scenario: str | Scenario = "narrow2d", num_envs: int = 16, robot: str | None = None, **settings: Any
+    ) -> None:
         self.config = EnvConfig(**settings)
         self.core = BatchedCore(_resolve(scenario, robot), num_envs, self.config)
         self.robot = self.core.robot
         self.num_envs = int(num_envs)
         self.single_observation_space = spaces.Dict(
-            {"observation": self.core.observer.space, "achieved_goal": _goal_space(self.core), "desired_goal": _goal_space(self.core)}
+            {
+                "observation": self.core.observer.space,
+                "achieved_goal": _goal_space(self.core),
+                "desired_goal": _goal_space(self.core),
+            }
         )
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(self.robot.twist_dim,), dtype=np.float32)
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, self.num_envs)
 
-    def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
+    def reset(
+        self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
         if isinstance(seed, int) or seed is None:
             super().reset(seed=seed)  # seeds self.np_random, the env's one generator
         else:  # one seed per environment: the generator is drawn from all of them
@@ -159,7 +181,9 @@ class PlanningVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.flo
         self.core.reset_envs(range(self.num_envs), self.np_random, problems)
         return self.core.observe(self.np_random), {}
 
-    def step(self, actions: NDArray[np.float32]) -> tuple[dict[str, NDArray[np.float32]], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Any]]:
+    def step(
+        self, actions: NDArray[np.float32]
+    ) -> tuple[dict[str, NDArray[np.float32]], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Any]]:
         reward, term, trunc, info = self.core.step(actions)
         done = term | trunc
         infos: dict[str, Any] = dict(info)

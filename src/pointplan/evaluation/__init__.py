@@ -11,4 +11,13 @@ from .evaluate import (
     path_length,
 )
 
-__all__ = ["EpisodeRecord", "EvalReport", "PathCheck", "check_path", "densify", "evaluate", "format_table", "path_length"]
+__all__ = [
+    "EpisodeRecord",
+    "EvalReport",
+    "PathCheck",
+    "check_path",
+    "densify",
+    "evaluate",
+    "format_table",
+    "path_length",
+]

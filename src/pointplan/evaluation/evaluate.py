@@ -17,11 +17,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..geometry.shapes import Shape
 from ..parallel import Interrupted, WorkerPool, backend, wants_workers
-from ..planners.base import path_length
+from ..planners.base import Planner, path_length
 from ..robots.base import Robot
 from ..robots.motion import intervals
 from ..scenes.scene import Problem
+from .arm_clearance import ArmClearance
 from .clearance import Clearance, advance
 
 Array = NDArray[np.float64]
@@ -62,7 +64,9 @@ def _malformed(robot: Robot, problem: Problem, path: Array, tolerance: float) ->
     return ""
 
 
-def check_path(robot: Robot, problem: Problem, path: Array, resolution: float = 0.01, tolerance: float = 0.07) -> PathCheck:
+def check_path(
+    robot: Robot, problem: Problem, path: Array, resolution: float = 0.01, tolerance: float = 0.07
+) -> PathCheck:
     """Is ``path`` a valid solution of ``problem``? Returns a :class:`PathCheck` (true or
     false, with the reason).
 
@@ -90,11 +94,13 @@ def check_path(robot: Robot, problem: Problem, path: Array, resolution: float = 
         return PathCheck(False, "the path leaves the workspace bounds")
     if scene.dynamic:
         steps = timed_path(robot, path)
-        pieces = [(Clearance(robot, scene.obstacles_at(j + 1)), steps[j], steps[j + 1]) for j in range(len(steps) - 1)]
+        pieces = [
+            (clearance_for(robot, scene.obstacles_at(j + 1)), steps[j], steps[j + 1]) for j in range(len(steps) - 1)
+        ]
         if len(steps) == 1:
-            pieces = [(Clearance(robot, scene.obstacles_at(0)), steps[0], steps[0])]
+            pieces = [(clearance_for(robot, scene.obstacles_at(0)), steps[0], steps[0])]
     else:
-        world = Clearance(robot, scene.obstacles)
+        world = clearance_for(robot, scene.obstacles)
         pieces = [(world, a, b) for a, b in zip(path[:-1], path[1:])] or [(world, path[0], path[0])]
     low = math.inf
     for j, (clear, a, b) in enumerate(pieces):
@@ -106,6 +112,15 @@ def check_path(robot: Robot, problem: Problem, path: Array, resolution: float = 
             what = "move" if scene.dynamic else "segment"
             return PathCheck(False, f"{what} {j} touches an obstacle (clearance {d:.3g})", low)
     return PathCheck(True, "", low)
+
+
+def clearance_for(robot: Robot, obstacles: Sequence[Shape]) -> Clearance:
+    """The evaluator's distance for ``robot``: :class:`Clearance` for rigid bodies, the
+    pinocchio + coal one (:class:`~pointplan.evaluation.arm_clearance.ArmClearance`) for an
+    arm loaded from a URDF."""
+    if getattr(robot, "urdf", None):
+        return ArmClearance(robot, obstacles)  # type: ignore[return-value]
+    return Clearance(robot, obstacles)
 
 
 def timed_path(robot: Robot, path: Array) -> Array:
@@ -224,7 +239,7 @@ class EvalReport:
 
 
 def evaluate(
-    planner: Any,
+    planner: Planner,
     problems: Sequence[Problem],
     robot: Robot,
     progress: bool = True,
@@ -265,7 +280,9 @@ def evaluate(
         if progress:
             it.close()
         report.interrupted = (len(report.records), len(problems))
-        print(f"\ninterrupted: kept the {len(report.records)} of {len(problems)} problems that finished", file=sys.stderr)
+        print(
+            f"\ninterrupted: kept the {len(report.records)} of {len(problems)} problems that finished", file=sys.stderr
+        )
     return report
 
 
@@ -278,14 +295,28 @@ def set_call_number(planner: Any, number: int) -> None:
 
 
 def _plan_and_check_at(
-    pos: int, planner: Any, problems: Sequence[Problem], robot: Robot, first_call: int, resolution: float, tolerance: float
+    pos: int,
+    planner: Planner,
+    problems: Sequence[Problem],
+    robot: Robot,
+    first_call: int,
+    resolution: float,
+    tolerance: float,
 ) -> EpisodeRecord:
     """Problem ``pos`` of an evaluation, in a worker: what the serial loop does for it."""
     set_call_number(planner, first_call + pos)
     return plan_and_check(planner, problems[pos], robot, resolution, tolerance)
 
 
-def _evaluate_in(pool: WorkerPool, planner: Any, problems: Sequence[Problem], robot: Robot, progress: bool, resolution: float, tolerance: float) -> EvalReport:
+def _evaluate_in(
+    pool: WorkerPool,
+    planner: Planner,
+    problems: Sequence[Problem],
+    robot: Robot,
+    progress: bool,
+    resolution: float,
+    tolerance: float,
+) -> EvalReport:
     """:func:`evaluate` on ``pool``'s workers. Each worker plans with its own copy of
     ``planner``, set to the call number a serial run would have; afterwards ``planner``
     here counts the calls as if it had planned them all. On Ctrl-C the report holds the
@@ -308,7 +339,12 @@ def _evaluate_in(pool: WorkerPool, planner: Any, problems: Sequence[Problem], ro
             bar.set_postfix(success=f"{solved[0] / solved[1]:.1%}")
 
     try:
-        records = pool.map(_plan_and_check_at, range(n), shared=(planner, problems, robot, first_call, resolution, tolerance), on_result=tick)
+        records = pool.map(
+            _plan_and_check_at,
+            range(n),
+            shared=(planner, problems, robot, first_call, resolution, tolerance),
+            on_result=tick,
+        )
     except Interrupted as stop:
         records = [stop.results[i] for i in sorted(stop.results)]
         report.interrupted = (len(records), n)
@@ -329,7 +365,9 @@ def endpoint_fault(robot: Robot, problem: Problem) -> str:
     return f"{' and '.join(which)} in collision" if which else ""
 
 
-def plan_and_check(planner: Any, problem: Problem, robot: Robot, resolution: float = 0.01, tolerance: float = 0.07) -> EpisodeRecord:
+def plan_and_check(
+    planner: Planner, problem: Problem, robot: Robot, resolution: float = 0.01, tolerance: float = 0.07
+) -> EpisodeRecord:
     """One problem planned and its path re-checked."""
     t0 = time.perf_counter()
     result = planner.plan(problem)

@@ -47,10 +47,7 @@ def slerp_pose(q0: Array, q1: Array, s: float) -> Array:
     if dot < 0.0:  # q and -q are one rotation: take the shorter way
         b, dot = -b, -dot
     half = math.acos(min(1.0, dot))
-    if half < 1e-9:
-        rot = a + s * (b - a)
-    else:
-        rot = (math.sin((1 - s) * half) * a + math.sin(s * half) * b) / math.sin(half)
+    rot = a + s * (b - a) if half < 1e-9 else (math.sin((1 - s) * half) * a + math.sin(s * half) * b) / math.sin(half)
     return np.concatenate([q0[:3] + s * (q1[:3] - q0[:3]), rot / np.linalg.norm(rot)])
 
 
@@ -61,7 +58,9 @@ def body_radius(robot: Robot) -> float:
     out = 0.0
     if len(p.box_halfs):
         signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], np.float64)[:, : robot.dim]
-        corners = p.box_centers[:, None, :] + np.einsum("pij,pkj->pki", p.box_rotations, signs[None] * p.box_halfs[:, None, :])
+        corners = p.box_centers[:, None, :] + np.einsum(
+            "pij,pkj->pki", p.box_rotations, signs[None] * p.box_halfs[:, None, :]
+        )
         out = float(np.linalg.norm(corners, axis=-1).max())
     if len(p.sphere_radii):
         out = max(out, float((np.linalg.norm(p.sphere_centers, axis=-1) + p.sphere_radii).max()))
@@ -113,7 +112,9 @@ def for_linear_slerp(robot: Robot, problem: Problem, path: Array, max_depth: int
                 out.append(b)
                 continue
             if depth >= max_depth:
-                raise ValueError(f"edge {j} of the path is not free under linear + slerp interpolation even split {2**depth} times")
+                raise ValueError(
+                    f"edge {j} of the path is not free under linear + slerp interpolation even split {2**depth} times"
+                )
             mid = robot.integrate(a, 0.5 * robot.log(a, b))
             stack += [(mid, b, depth + 1), (a, mid, depth + 1)]
     return np.stack(out)

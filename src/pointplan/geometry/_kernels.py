@@ -23,7 +23,9 @@ def _obb_overlap_flat(ca, ra, ha, cb, rb, hb, out):  # type: ignore[no-untyped-d
                 d0 = cb[b, j, 0] - ca[b, i, 0]
                 d1 = cb[b, j, 1] - ca[b, i, 1]
                 d2 = cb[b, j, 2] - ca[b, i, 2]
-                reach = np.sqrt(ha[b, i, 0] ** 2 + ha[b, i, 1] ** 2 + ha[b, i, 2] ** 2) + np.sqrt(hb[b, j, 0] ** 2 + hb[b, j, 1] ** 2 + hb[b, j, 2] ** 2)
+                reach = np.sqrt(ha[b, i, 0] ** 2 + ha[b, i, 1] ** 2 + ha[b, i, 2] ** 2) + np.sqrt(
+                    hb[b, j, 0] ** 2 + hb[b, j, 1] ** 2 + hb[b, j, 2] ** 2
+                )
                 if d0 * d0 + d1 * d1 + d2 * d2 > reach * reach:
                     out[b, i, j] = False
                     continue
@@ -102,7 +104,11 @@ def _ray_box_flat(o, d, c, rot, h, t0, t1, axis):  # type: ignore[no-untyped-def
                 ax = 0
                 for i in range(3):
                     # local coordinates: column i of the rotation
-                    ol = (o[b, r, 0] - c[b, k, 0]) * rot[b, k, 0, i] + (o[b, r, 1] - c[b, k, 1]) * rot[b, k, 1, i] + (o[b, r, 2] - c[b, k, 2]) * rot[b, k, 2, i]
+                    ol = (
+                        (o[b, r, 0] - c[b, k, 0]) * rot[b, k, 0, i]
+                        + (o[b, r, 1] - c[b, k, 1]) * rot[b, k, 1, i]
+                        + (o[b, r, 2] - c[b, k, 2]) * rot[b, k, 2, i]
+                    )
                     dl = d[b, r, 0] * rot[b, k, 0, i] + d[b, r, 1] * rot[b, k, 1, i] + d[b, r, 2] * rot[b, k, 2, i]
                     hh = h[b, k, i]
                     if dl == 0.0:
@@ -167,7 +173,12 @@ def _winding_numbers(points, tri, out):  # type: ignore[no-untyped-def]
             lb = np.sqrt(bx * bx + by * by + bz * bz)
             lc = np.sqrt(cx * cx + cy * cy + cz * cz)
             num = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)
-            den = la * lb * lc + (ax * bx + ay * by + az * bz) * lc + (ax * cx + ay * cy + az * cz) * lb + (bx * cx + by * cy + bz * cz) * la
+            den = (
+                la * lb * lc
+                + (ax * bx + ay * by + az * bz) * lc
+                + (ax * cx + ay * cy + az * cz) * lb
+                + (bx * cx + by * cy + bz * cz) * la
+            )
             total += np.arctan2(num, den)
         out[n] = total / (2.0 * np.pi)
 

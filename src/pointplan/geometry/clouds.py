@@ -56,7 +56,9 @@ def read_point_file(path: str | Path) -> tuple[Array, Array | None]:
     elif suffix in (".npy", ".xyz", ".txt", ".csv"):
         points, normals = _read_table(path)
     else:
-        raise CloudError(f"unsupported file type {suffix or '(none)'!r} of {path.name!r}; use one of {', '.join(POINT_FILE_SUFFIXES)}")
+        raise CloudError(
+            f"unsupported file type {suffix or '(none)'!r} of {path.name!r}; use one of {', '.join(POINT_FILE_SUFFIXES)}"
+        )
     if len(points) == 0:
         raise CloudError(f"points file {path.name!r} holds no points")
     if not np.all(np.isfinite(points)):
@@ -288,7 +290,9 @@ def read_depth_image(path: str | Path) -> Array:
         raise CloudError(f"cannot read depth image {path.name!r}: {exc}") from None
     depth = np.asarray(depth)
     if depth.ndim != 2 or not np.issubdtype(depth.dtype, np.number):
-        raise CloudError(f"depth image {path.name!r}: expected one channel of numbers (H, W), got shape {depth.shape} of {depth.dtype}")
+        raise CloudError(
+            f"depth image {path.name!r}: expected one channel of numbers (H, W), got shape {depth.shape} of {depth.dtype}"
+        )
     return depth.astype(np.float64)
 
 

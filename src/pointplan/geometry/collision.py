@@ -234,7 +234,14 @@ class CollisionWorld:
             shapes=[coal_shapes],
             coal_items=[
                 [(g, tf, *_bounding_sphere(m), m) for m, (g, tf) in zip(meshes, coal_objs)]
-                + ([(*_coal_primitive(sh), *_bounding_sphere(sh), None) for sh in list(caps) + list(cyls) + list(cones)] if d == 3 else [])
+                + (
+                    [
+                        (*_coal_primitive(sh), *_bounding_sphere(sh), None)
+                        for sh in list(caps) + list(cyls) + list(cones)
+                    ]
+                    if d == 3
+                    else []
+                )
             ],
             meshes=[list(meshes)],
         )

@@ -458,7 +458,9 @@ def cast_rays(world: CollisionWorld, origins: Array, directions: Array, max_rang
     return RayHits(dist.reshape(shape), points.reshape(shape + (3,)), normal.reshape(shape + (3,)), hit.reshape(shape))
 
 
-def _checked_rays(world: CollisionWorld, origins: Array, directions: Array, max_range: float) -> tuple[tuple[int, ...], Array, Array, float]:
+def _checked_rays(
+    world: CollisionWorld, origins: Array, directions: Array, max_range: float
+) -> tuple[tuple[int, ...], Array, Array, float]:
     """The batch shape, origins and unit directions (broadcast to the origins' shape) and the
     range, checked."""
     if world.dim != 3:
@@ -528,7 +530,9 @@ def _primitive_hits(world: CollisionWorld, o2: Array, d2: Array) -> tuple[Array,
     return best, inside, normal
 
 
-def _mesh_hits(world: CollisionWorld, o2: Array, d2: Array, best: Array, inside: NDArray[np.bool_], normal: Array) -> None:
+def _mesh_hits(
+    world: CollisionWorld, o2: Array, d2: Array, best: Array, inside: NDArray[np.bool_], normal: Array
+) -> None:
     """Bring ``best``, ``inside`` and ``normal`` (from the primitives) up to date with the
     meshes: one first-hit query per scene over all of its meshes."""
     for b in range(o2.shape[0]):
@@ -571,7 +575,9 @@ def _first_cloud_hits(o, d, pts, radius, best, which):  # type: ignore[no-untype
         best[i] = bi
 
 
-def _cloud_hits(world: CollisionWorld, o2: Array, d2: Array, best: Array, inside: NDArray[np.bool_], normal: Array, max_range: float) -> None:
+def _cloud_hits(
+    world: CollisionWorld, o2: Array, d2: Array, best: Array, inside: NDArray[np.bool_], normal: Array, max_range: float
+) -> None:
     """Bring ``best``, ``inside`` and ``normal`` up to date with the scenes' point clouds
     (see the module docstring): only the points within reach of the rays are tried (one
     k-d tree query per scene)."""
@@ -588,7 +594,14 @@ def _cloud_hits(world: CollisionWorld, o2: Array, d2: Array, best: Array, inside
             continue
         nb = best[b].copy()
         which = np.full(o2.shape[1], -1, np.int64)
-        _first_cloud_hits(np.ascontiguousarray(o2[b]), np.ascontiguousarray(d2[b]), np.ascontiguousarray(tree.data[cand]), radius, nb, which)
+        _first_cloud_hits(
+            np.ascontiguousarray(o2[b]),
+            np.ascontiguousarray(d2[b]),
+            np.ascontiguousarray(tree.data[cand]),
+            radius,
+            nb,
+            which,
+        )
         got = which >= 0
         if not got.any():
             continue

@@ -137,7 +137,9 @@ def fibonacci_sphere(n: int) -> Array:
     return np.stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)], 1)
 
 
-def surface_points(shapes: Sequence[Shape], spacing: float, low: Array | None = None, high: Array | None = None) -> tuple[Array, Array]:
+def surface_points(
+    shapes: Sequence[Shape], spacing: float, low: Array | None = None, high: Array | None = None
+) -> tuple[Array, Array]:
     """Points on the union's boundary about ``spacing`` apart, with outward normals.
 
     Points buried inside another obstacle are dropped, and so are points on the bounds'
@@ -286,7 +288,9 @@ def shape_area(s: Shape) -> float:
     return float(shape_to_trimesh(s).area)
 
 
-def area_weighted_points(shapes: Sequence[Shape], n: int, rng: np.random.Generator, drop_hidden: bool = True) -> tuple[Array, Array, NDArray[np.int64]]:
+def area_weighted_points(
+    shapes: Sequence[Shape], n: int, rng: np.random.Generator, drop_hidden: bool = True
+) -> tuple[Array, Array, NDArray[np.int64]]:
     """``n`` points drawn uniformly on the obstacles' surfaces (each shape gets points in
     proportion to its area) with outward normals, and the index of the shape each lies on.
 
@@ -354,9 +358,19 @@ def _hidden(p: Array, owner: NDArray[np.int64], shapes: Sequence[Shape], eps: fl
         elif isinstance(s, Capsule):
             hit = point_segment_sqdist(q, s.a[None], s.b[None])[:, 0] < (s.radius - eps) ** 2
         elif isinstance(s, Cylinder):
-            hit = point_cylinder_sqdist(q, s.center[None], s.rotation[None], np.array([s.radius - eps]), np.array([s.length / 2 - eps]))[:, 0] <= 0
+            hit = (
+                point_cylinder_sqdist(
+                    q, s.center[None], s.rotation[None], np.array([s.radius - eps]), np.array([s.length / 2 - eps])
+                )[:, 0]
+                <= 0
+            )
         elif isinstance(s, Cone):
-            hit = point_cone_sqdist(q, s.center[None], s.rotation[None], np.array([s.radius - eps]), np.array([s.length / 2 - eps]))[:, 0] <= 0
+            hit = (
+                point_cone_sqdist(
+                    q, s.center[None], s.rotation[None], np.array([s.radius - eps]), np.array([s.length / 2 - eps])
+                )[:, 0]
+                <= 0
+            )
         elif isinstance(s, Mesh):
             lo, hi = s.vertices.min(0), s.vertices.max(0)
             box = np.all((q > lo) & (q < hi), axis=1)  # the inside test only where it can hold

@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -30,6 +30,14 @@ from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Problem
 from .rundir import RunDir, load_trainer_state, say_interrupted_early
+
+if TYPE_CHECKING:
+    from concurrent.futures import Executor
+
+    from ..parallel import WorkerPool
+
+    #: where demonstrations are planned: a worker pool, or a ``concurrent.futures`` pool of processes
+    DemoPool = WorkerPool | Executor
 
 
 @dataclass
@@ -105,7 +113,7 @@ def _single_thread() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def demo_pool(workers: int, address: str | None = None) -> Any:
+def demo_pool(workers: int, address: str | None = None) -> DemoPool | None:
     """A pool for :func:`plan_demos`: the default back end's workers when it can run here
     (Ray, :class:`pointplan.distributed.RayPool`; ``address`` joins a cluster), else a
     process pool; ``None`` for one worker and no address."""
@@ -114,15 +122,22 @@ def demo_pool(workers: int, address: str | None = None) -> Any:
     if backend().available():
         return backend().pool(workers if workers > 1 else None, address)
     if address:
-        raise RuntimeError("running on several workers needs Ray: pip install 'pointplan[ray]' (or drop --workers/--address to run in one process)")
-    print(f"pointplan: planning in {workers} local processes; running on several workers needs Ray: pip install 'pointplan[ray]' to use Ray", file=sys.stderr)
+        raise RuntimeError(
+            "running on several workers needs Ray: pip install 'pointplan[ray]' (or drop --workers/--address to run in one process)"
+        )
+    print(
+        f"pointplan: planning in {workers} local processes; running on several workers needs Ray: pip install 'pointplan[ray]' to use Ray",
+        file=sys.stderr,
+    )
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
     return ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=_single_thread)
 
 
-def plan_demos(jobs: list[DemoJob], pool: Any = None, progress: bool = True, desc: str = "demonstrations") -> list[tuple[int, np.ndarray]]:
+def plan_demos(
+    jobs: list[DemoJob], pool: DemoPool | None = None, progress: bool = True, desc: str = "demonstrations"
+) -> list[tuple[int, np.ndarray]]:
     """Plan every job (in ``pool`` if given: a ``concurrent.futures`` pool or a
     :class:`~pointplan.parallel.WorkerPool`; each job has its own planner seed, so the
     result does not depend on the workers); returns the solved ones in job order."""
@@ -139,10 +154,15 @@ def plan_demos(jobs: list[DemoJob], pool: Any = None, progress: bool = True, des
         live_bar = bar
         bar = None  # advanced as results arrive, not in the loop below
         try:
-            results: Any = pool.map(_plan_demo, jobs, on_result=lambda *_: live_bar.update() if live_bar is not None else None)
+            results: Any = pool.map(
+                _plan_demo, jobs, on_result=lambda *_: live_bar.update() if live_bar is not None else None
+            )
         except Interrupted as stop:
             results = [stop.results[i] for i in sorted(stop.results)]
-            print(f"\ninterrupted: keeping the {len(results)} of {len(jobs)} demonstrations that finished", file=sys.stderr)
+            print(
+                f"\ninterrupted: keeping the {len(results)} of {len(jobs)} demonstrations that finished",
+                file=sys.stderr,
+            )
         finally:
             if live_bar is not None:
                 live_bar.close()
@@ -169,7 +189,7 @@ def generate_demos(
     address: str | None = None,
     attempts: int = 1,
     margin: float = 0.0,
-    pool: Any = None,
+    pool: DemoPool | None = None,
 ) -> Demos:
     """Plan ``n_problems`` training problems with Bi-RRT and cut the paths into steps (in
     ``pool`` if given, else on ``workers`` Ray workers or processes, see :func:`demo_pool`);
@@ -182,7 +202,10 @@ def generate_demos(
         raise ValueError(f"attempts must be >= 1, not {attempts}")
     robot_name = scenario.robot.name if scenario.robot.dim == 3 else None
     index = [_demo_index(seed, n_problems, i) for i in range(n_problems)]
-    jobs: list[DemoJob] = [(scenario.name, robot_name, split, k, seed, seed * 7_919 + k, max_nodes, None, attempts, float(margin)) for k in index]
+    jobs: list[DemoJob] = [
+        (scenario.name, robot_name, split, k, seed, seed * 7_919 + k, max_nodes, None, attempts, float(margin))
+        for k in index
+    ]
     own = pool is None
     if own:
         pool = demo_pool(workers, address)
@@ -211,7 +234,14 @@ def demos_from_paths(scenario: Scenario, split: str, seed: int, paths: list[tupl
         idx.append(np.full(len(a), order[index]))
     if not qs:
         raise ValueError("no demonstration was solved")
-    return Demos(np.concatenate(qs), np.concatenate(goals), np.concatenate(acts).astype(np.float32), np.concatenate(idx), list(problems.values()), list(paths))
+    return Demos(
+        np.concatenate(qs),
+        np.concatenate(goals),
+        np.concatenate(acts).astype(np.float32),
+        np.concatenate(idx),
+        list(problems.values()),
+        list(paths),
+    )
 
 
 def save_demos(path: str | Path, scenario: Scenario, demos: Demos, split: str, seed: int) -> None:
@@ -220,14 +250,25 @@ def save_demos(path: str | Path, scenario: Scenario, demos: Demos, split: str, s
     lengths = np.array([len(p) for _, p in demos.paths], np.int64)
     flat = np.concatenate([p for _, p in demos.paths]) if demos.paths else np.zeros((0, scenario.robot.config_dim))
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(path, env=scenario.name, robot=scenario.robot.name, split=split, seed=seed, index=keys, lengths=lengths, configs=flat)
+    np.savez_compressed(
+        path,
+        env=scenario.name,
+        robot=scenario.robot.name,
+        split=split,
+        seed=seed,
+        index=keys,
+        lengths=lengths,
+        configs=flat,
+    )
 
 
 def load_demos(path: str | Path, scenario: Scenario) -> Demos:
     """Demonstrations saved by :func:`save_demos` (the problems are rebuilt from their indices)."""
     with np.load(path, allow_pickle=False) as f:
         if str(f["env"]) != scenario.name or str(f["robot"]) != scenario.robot.name:
-            raise ValueError(f"{path}: demonstrations of {f['env']} / {f['robot']}, not {scenario.name} / {scenario.robot.name}")
+            raise ValueError(
+                f"{path}: demonstrations of {f['env']} / {f['robot']}, not {scenario.name} / {scenario.robot.name}"
+            )
         split, seed = str(f["split"]), int(f["seed"])
         pieces = np.split(f["configs"], np.cumsum(f["lengths"])[:-1]) if len(f["lengths"]) else []
         paths = [(int(k), np.asarray(c)) for k, c in zip(f["index"], pieces)]
@@ -240,7 +281,9 @@ def observation_shape(robot: Robot, env: EnvConfig) -> tuple[int, ...]:
     return tuple(make_observer(str(env.observation), robot, **kwargs).space.shape)
 
 
-def observe_demos(demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Generator, chunk: int = 4096) -> np.ndarray:
+def observe_demos(
+    demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Generator, chunk: int = 4096
+) -> np.ndarray:
     """Observations of every demonstration step (the observer's random subsets are drawn
     anew on every call, so calling again gives a fresh augmentation)."""
     kwargs: dict[str, Any] = {} if env.observation == "image" else {"n_points": env.n_points}
@@ -253,7 +296,9 @@ def observe_demos(demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Gen
     return np.concatenate(out)
 
 
-def demo_episodes(demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Generator, horizon: int | None = None) -> list[tuple[np.ndarray, ...]]:
+def demo_episodes(
+    demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Generator, horizon: int | None = None
+) -> list[tuple[np.ndarray, ...]]:
     """The demonstration paths as the episodes an environment would have produced, in
     :meth:`~pointplan.learning.replay.EpisodeReplay.add_episode`'s order (obs, next_obs,
     q, q_next, goal, action, action_norm, collided): each step moves from ``q_t`` to
@@ -331,7 +376,11 @@ class BCConfig:
     #: the residuals of its mean action, before the tanh, with the mean held fixed; 0 leaves
     #: the spread unfitted (what SAC then samples from is whatever the untrained head gives)
     spread_weight: float = field(default=0.0, metadata={"min": 0})
-    net: NetConfig = field(default_factory=lambda: NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True))
+    net: NetConfig = field(
+        default_factory=lambda: NetConfig(
+            EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True
+        )
+    )
     #: workers planning the demonstrations (Ray when installed, else processes); the demonstrations equal a serial run's
     workers: int = field(default=1, metadata={"min": 1})
     #: a Ray cluster to plan the demonstrations on
@@ -353,7 +402,7 @@ def train_bc(
     run_dir: str | Path,
     progress: bool = True,
     demos: Demos | None = None,
-    pool: Any = None,
+    pool: DemoPool | None = None,
     resume: str | Path | None = None,
     eval_episodes: int = 0,
 ) -> dict[str, Any]:
@@ -383,16 +432,18 @@ def train_bc(
     opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr)
     losses, wall_before = _restore_bc(ckpt, actor, opt, rng) if ckpt is not None else ([], 0.0)
     if len(losses) >= cfg.epochs:
-        raise ValueError(f"{resume}: the run has done its {len(losses)} epochs; give --epochs above that to continue it")
+        raise ValueError(
+            f"{resume}: the run has done its {len(losses)} epochs; give --epochs above that to continue it"
+        )
     if ckpt is not None:
         folder.metrics.drop_after(len(losses))
-    val = None
-    with folder.ctrl_c() as stop:
-        fit_actor(actor, opt, demos, robot, env, cfg.epochs, cfg.batch_size, rng, cfg.refresh_every, progress, cfg.spread_weight, losses, stop, folder.log)
-        if len(losses) == cfg.epochs and eval_episodes:
-            val = validate_actor(actor, scenario, env, eval_episodes, cfg.seed, cfg.device)
+    val = _fit_bc(cfg, actor, opt, demos, scenario, env, rng, losses, folder, progress, eval_episodes)
     train_time = wall_before + time.perf_counter() - t0 - t_demos
-    payload = {**policy_payload(cfg, robot.name, obs_shape, actor, scenario.horizon), "bc_config": to_dict(cfg), "demo_steps": len(demos)}
+    payload = {
+        **policy_payload(cfg, robot.name, obs_shape, actor, scenario.horizon),
+        "bc_config": to_dict(cfg),
+        "demo_steps": len(demos),
+    }
     trainer = {
         "epochs": len(losses),
         "losses": list(losses),
@@ -401,15 +452,15 @@ def train_bc(
         "wall_time_s": train_time,
         "eval_episodes": eval_episodes,
     }
-    save_last = lambda: folder.save("last.pt", {**payload, "bc_trainer": {**trainer, "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}})
-    summary = {"run_dir": str(folder.path), "demo_steps": len(demos), "demo_problems": len(demos.problems), "epochs": len(losses), "interrupted": False}
-    if len(losses) < cfg.epochs:
-        folder.interrupted(f"in epoch {len(losses) + 1} of {cfg.epochs}", save_last)
-        folder.close()
+    summary = {
+        "run_dir": str(folder.path),
+        "demo_steps": len(demos),
+        "demo_problems": len(demos.problems),
+        "epochs": len(losses),
+        "interrupted": False,
+    }
+    if not _save_bc(folder, payload, trainer, rng, cfg.epochs, val):
         return {**summary, "interrupted": True}
-    folder.save("bc.pt", {**payload, **({"val_success": val} if val is not None else {})})
-    save_last()
-    folder.close()
     return {
         **summary,
         "checkpoint": str(folder.path / "bc.pt"),
@@ -421,8 +472,80 @@ def train_bc(
     }
 
 
+def _fit_bc(
+    cfg: BCConfig,
+    actor: Actor,
+    opt: torch.optim.Optimizer,
+    demos: Demos,
+    scenario: Scenario,
+    env: EnvConfig,
+    rng: np.random.Generator,
+    losses: list[float],
+    folder: RunDir,
+    progress: bool,
+    eval_episodes: int,
+) -> float | None:
+    """Fit ``actor`` to ``demos`` up to ``cfg.epochs`` (``losses`` holds the epochs done
+    and gets the new ones; Ctrl-C ends the fit after the current gradient step); then, when
+    every epoch is done, its success rate on ``eval_episodes`` validation problems (None
+    without them)."""
+    val = None
+    with folder.ctrl_c() as stop:
+        fit_actor(
+            actor,
+            opt,
+            demos,
+            scenario.robot,
+            env,
+            cfg.epochs,
+            cfg.batch_size,
+            rng,
+            cfg.refresh_every,
+            progress,
+            cfg.spread_weight,
+            losses,
+            stop,
+            folder.log,
+        )
+        if len(losses) == cfg.epochs and eval_episodes:
+            val = validate_actor(actor, scenario, env, eval_episodes, cfg.seed, cfg.device)
+    return val
+
+
+def _save_bc(
+    folder: RunDir,
+    payload: dict[str, Any],
+    trainer: dict[str, Any],
+    rng: np.random.Generator,
+    epochs: int,
+    val: float | None,
+) -> bool:
+    """Write a cloning run's ``last.pt`` (through ``folder.interrupted`` when the run
+    stopped before its ``epochs``) and, when it did them all, ``bc.pt``; close the folder.
+    Returns whether the run did all its epochs."""
+    save_last = lambda: folder.save(
+        "last.pt",
+        {**payload, "bc_trainer": {**trainer, "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}},
+    )
+    done = trainer["epochs"]
+    if done < epochs:
+        folder.interrupted(f"in epoch {done + 1} of {epochs}", save_last)
+        folder.close()
+        return False
+    folder.save("bc.pt", {**payload, **({"val_success": val} if val is not None else {})})
+    save_last()
+    folder.close()
+    return True
+
+
 def _bc_demos(
-    cfg: BCConfig, scenario: Scenario, folder: RunDir, progress: bool, demos: Demos | None, pool: Any, state: dict[str, Any] | None
+    cfg: BCConfig,
+    scenario: Scenario,
+    folder: RunDir,
+    progress: bool,
+    demos: Demos | None,
+    pool: DemoPool | None,
+    state: dict[str, Any] | None,
 ) -> tuple[Demos, str | None]:
     """The demonstrations of a cloning run and the file that keeps them (None: given, not
     kept): a resumed run's own, ``cfg.demos_file`` when it exists, else planned and written
@@ -435,7 +558,9 @@ def _bc_demos(
     if cfg.demos_file and Path(cfg.demos_file).exists():
         demos = load_demos(cfg.demos_file, scenario)
         if progress and len(demos.problems) != cfg.n_problems:
-            print(f"{cfg.demos_file}: all its {len(demos.problems)} demonstrations are used (--problems {cfg.n_problems} counts only problems to plan)")
+            print(
+                f"{cfg.demos_file}: all its {len(demos.problems)} demonstrations are used (--problems {cfg.n_problems} counts only problems to plan)"
+            )
         return demos, cfg.demos_file
     demos = generate_demos(
         scenario,
@@ -453,7 +578,9 @@ def _bc_demos(
     return demos, path
 
 
-def _restore_bc(ckpt: dict[str, Any], actor: Actor, opt: torch.optim.Optimizer, rng: np.random.Generator) -> tuple[list[float], float]:
+def _restore_bc(
+    ckpt: dict[str, Any], actor: Actor, opt: torch.optim.Optimizer, rng: np.random.Generator
+) -> tuple[list[float], float]:
     """Load a cloning run's ``last.pt``; returns the losses of its epochs and its training time."""
     actor.load_state_dict(ckpt["actor"])
     state = ckpt["bc_trainer"]
@@ -463,7 +590,9 @@ def _restore_bc(ckpt: dict[str, Any], actor: Actor, opt: torch.optim.Optimizer, 
     return [float(x) for x in state["losses"]], float(state["wall_time_s"])
 
 
-def validate_actor(actor: Actor, scenario: Scenario, env: EnvConfig, episodes: int, seed: int, device: str = "cpu") -> float:
+def validate_actor(
+    actor: Actor, scenario: Scenario, env: EnvConfig, episodes: int, seed: int, device: str = "cpu"
+) -> float:
     """Success rate of the actor's mean action on the first ``episodes`` validation problems
     (the rollout engine, as training validation does)."""
     from ..models.policy import Policy
@@ -472,7 +601,12 @@ def validate_actor(actor: Actor, scenario: Scenario, env: EnvConfig, episodes: i
     policy = Policy(actor, scenario.robot, {"observation": env.observation, "n_points": env.n_points}, device)
     problems = scenario.problems("val", episodes, seed=seed)
     res = rollout_batch(
-        policy, scenario.robot, EnvConfig(observation=env.observation, n_points=env.n_points, split="val"), problems, scenario.horizon, seed=seed
+        policy,
+        scenario.robot,
+        EnvConfig(observation=env.observation, n_points=env.n_points, split="val"),
+        problems,
+        scenario.horizon,
+        seed=seed,
     )
     actor.train()
     return float(np.mean([r.success for r in res]))

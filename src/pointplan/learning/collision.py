@@ -50,7 +50,14 @@ from ..observers import make_observer
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Scene
-from .rundir import CtrlC, RunDir, atomic_write, load_trainer_state, optimizer_and_random_state, restore_optimizer_and_random_state
+from .rundir import (
+    CtrlC,
+    RunDir,
+    atomic_write,
+    load_trainer_state,
+    optimizer_and_random_state,
+    restore_optimizer_and_random_state,
+)
 
 Array = NDArray[np.float64]
 
@@ -186,6 +193,51 @@ class CollisionSamples:
         return np.abs(self.clearance(label)) < band
 
 
+def _scene_samples(
+    robot: Robot,
+    scene: Scene,
+    where: str,
+    radius: float,
+    per_scene: int,
+    quota: NDArray[np.int64],
+    rng: np.random.Generator,
+    band: float,
+    label: str,
+    sampling: str,
+) -> dict[str, Array]:
+    """The samples of one workspace (``where``, for the error), ``quota[k]`` in stratum
+    ``k``: arrays ``q``, ``a``, ``e``, ``ce``, ``cs`` (see :func:`draw_samples`)."""
+    taken: list[list[NDArray[np.int64]]] = [[] for _ in range(4)]
+    pool: dict[str, list[Array]] = {"q": [], "a": [], "e": [], "ce": [], "cs": []}
+    have = np.zeros(4, dtype=np.int64)
+    offset = 0
+    for _ in range(1000):
+        if np.all(have >= quota):
+            break
+        n = 8 * per_scene
+        q = rng.uniform(scene.low, scene.high, size=(n, 2))
+        q = q[point_clearance(scene, q, radius) > 0.0]  # free starts
+        a = rng.uniform(-1.0, 1.0, size=(len(q), 2))
+        e = end_configuration(robot, q, a, scene.low, scene.high)
+        c_end = point_clearance(scene, e, radius)
+        c_sw = segment_clearance(scene, q, e, radius)
+        c = label_clearance(label, c_end, c_sw)
+        strata = np.where(c <= 0.0, np.where(c > -band, 0, 1), np.where(c < band, 2, 3))
+        if sampling == "uniform":
+            strata = np.zeros(len(c), dtype=np.int64)
+        for k in range(4):
+            pick = np.flatnonzero(strata == k)[: max(quota[k] - have[k], 0)]
+            taken[k].append(pick + offset)
+            have[k] += len(pick)
+        for key, v in zip(("q", "a", "e", "ce", "cs"), (q, a, e, c_end, c_sw)):
+            pool[key].append(v)
+        offset += len(q)
+    else:
+        raise RuntimeError(f"workspace {where}: could not fill the strata ({have.tolist()} of {quota.tolist()})")
+    sel = np.concatenate([np.concatenate(t) for t in taken])
+    return {k: np.concatenate(v)[sel] for k, v in pool.items()}
+
+
 def draw_samples(
     scenario: Scenario,
     split: str,
@@ -221,37 +273,9 @@ def draw_samples(
         it = tqdm(it, desc=f"{split} samples", unit="workspace")
     for i in it:
         scene = scenario.scene(split, i)
-        taken: list[list[NDArray[np.int64]]] = [[] for _ in range(4)]
-        pool: dict[str, list[Array]] = {"q": [], "a": [], "e": [], "ce": [], "cs": []}
-        have = np.zeros(4, dtype=np.int64)
-        offset = 0
-        for _ in range(1000):
-            if np.all(have >= quota):
-                break
-            n = 8 * per_scene
-            q = rng.uniform(scene.low, scene.high, size=(n, 2))
-            q = q[point_clearance(scene, q, radius) > 0.0]  # free starts
-            a = rng.uniform(-1.0, 1.0, size=(len(q), 2))
-            e = end_configuration(robot, q, a, scene.low, scene.high)
-            c_end = point_clearance(scene, e, radius)
-            c_sw = segment_clearance(scene, q, e, radius)
-            c = label_clearance(label, c_end, c_sw)
-            strata = np.where(c <= 0.0, np.where(c > -band, 0, 1), np.where(c < band, 2, 3))
-            if sampling == "uniform":
-                strata = np.zeros(len(c), dtype=np.int64)
-            for k in range(4):
-                pick = np.flatnonzero(strata == k)[: max(quota[k] - have[k], 0)]
-                taken[k].append(pick + offset)
-                have[k] += len(pick)
-            for key, v in zip(("q", "a", "e", "ce", "cs"), (q, a, e, c_end, c_sw)):
-                pool[key].append(v)
-            offset += len(q)
-        else:
-            raise RuntimeError(f"workspace {split}/{i}: could not fill the strata ({have.tolist()} of {quota.tolist()})")
-        sel = np.concatenate([np.concatenate(t) for t in taken])
-        cat = {k: np.concatenate(v)[sel] for k, v in pool.items()}
+        cat = _scene_samples(robot, scene, f"{split}/{i}", radius, per_scene, quota, rng, band, label, sampling)
         scenes.append(scene)
-        idx.append(np.full(len(sel), len(scenes) - 1, np.int64))
+        idx.append(np.full(len(cat["q"]), len(scenes) - 1, np.int64))
         qs.append(cat["q"])
         acts.append(cat["a"])
         ends.append(cat["e"])
@@ -268,7 +292,14 @@ def draw_samples(
     )
 
 
-def observe_samples(samples: CollisionSamples, robot: Robot, observation: str, n_points: int, rng: np.random.Generator, chunk: int = 1024) -> NDArray[Any]:
+def observe_samples(
+    samples: CollisionSamples,
+    robot: Robot,
+    observation: str,
+    n_points: int,
+    rng: np.random.Generator,
+    chunk: int = 1024,
+) -> NDArray[Any]:
     """The robot-centred observation at each sample's start, as the policies see it:
     point sets scaled to steps (:func:`pointplan.models.inputs.obs_input`, float32), or
     occupancy images (uint8, to keep them small)."""
@@ -287,7 +318,14 @@ def observe_samples(samples: CollisionSamples, robot: Robot, observation: str, n
 class CollisionClassifier(nn.Module):
     """Encoder of the observation, then an MLP on ``[feature, action]`` to one logit."""
 
-    def __init__(self, obs_shape: tuple[int, ...], encoder: EncoderConfig, action_dim: int = 2, head_width: int = 256, head_layers: int = 3) -> None:
+    def __init__(
+        self,
+        obs_shape: tuple[int, ...],
+        encoder: EncoderConfig,
+        action_dim: int = 2,
+        head_width: int = 256,
+        head_layers: int = 3,
+    ) -> None:
         super().__init__()
         self.encoder = make_encoder(encoder, obs_shape)
         feat = int(self.encoder.features_dim)  # type: ignore[arg-type]
@@ -382,7 +420,17 @@ def make_data(cfg: CollisionConfig, progress: bool = False) -> dict[str, Collisi
     for k, (name, (split, sampling)) in enumerate(SAMPLE_SETS.items()):
         rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, k, 0xC011]))
         how = sampling or cfg.sampling
-        out[name] = draw_samples(scenario, split, sizes[split], cfg.per_scene, rng, cfg.band, cfg.label, progress and name != "test_uniform", how)
+        out[name] = draw_samples(
+            scenario,
+            split,
+            sizes[split],
+            cfg.per_scene,
+            rng,
+            cfg.band,
+            cfg.label,
+            progress and name != "test_uniform",
+            how,
+        )
     return out
 
 
@@ -474,7 +522,9 @@ class _Fit:
     best_state: dict[str, torch.Tensor] | None = None
     train_before: float = 0.0
 
-    def state(self, cfg: CollisionConfig, obs_shape: list[int], queue: Sequence[str], train_time: float) -> dict[str, Any]:
+    def state(
+        self, cfg: CollisionConfig, obs_shape: list[int], queue: Sequence[str], train_time: float
+    ) -> dict[str, Any]:
         """``last.pt``: the classifier (as :func:`save_classifier` keeps it) and the trainer state."""
         trainer = {
             "epoch": self.epoch,
@@ -486,7 +536,12 @@ class _Fit:
             "train_time_s": train_time,
             "queue": list(queue),
         }
-        return {"config": to_dict(cfg), "obs_shape": obs_shape, "model": self.model.state_dict(), "collision_trainer": trainer}
+        return {
+            "config": to_dict(cfg),
+            "obs_shape": obs_shape,
+            "model": self.model.state_dict(),
+            "collision_trainer": trainer,
+        }
 
     def resume(self, path: str | Path) -> None:
         state = load_trainer_state(path, "collision_trainer", "pointplan collision-classify")
@@ -494,7 +549,11 @@ class _Fit:
         t = state["collision_trainer"]
         restore_optimizer_and_random_state(t, self.opt, self.rng)
         self.epoch, self.best_acc, self.best_epoch = int(t["epoch"]), float(t["best_acc"]), int(t["best_epoch"])
-        self.history, self.best_state, self.train_before = [dict(r) for r in t["history"]], t["best_model"], float(t["train_time_s"])
+        self.history, self.best_state, self.train_before = (
+            [dict(r) for r in t["history"]],
+            t["best_model"],
+            float(t["train_time_s"]),
+        )
 
 
 def _set_lr(opt: torch.optim.Optimizer, cfg: CollisionConfig, epoch: int) -> None:
@@ -502,7 +561,8 @@ def _set_lr(opt: torch.optim.Optimizer, cfg: CollisionConfig, epoch: int) -> Non
     ``lr_end`` at the last (constant when ``lr_end`` is 0)."""
     end = cfg.lr_end or cfg.lr
     frac = (epoch - 1) / max(cfg.epochs - 1, 1)
-    lr = end + 0.5 * (cfg.lr - end) * (1.0 + np.cos(np.pi * frac))
+    # a plain float: a checkpoint (the optimiser's state) holds no numpy scalars
+    lr = float(end + 0.5 * (cfg.lr - end) * (1.0 + np.cos(np.pi * frac)))
     for g in opt.param_groups:
         g["lr"] = lr
 
@@ -530,6 +590,47 @@ def _train_epoch(fit: _Fit, tr: SplitData, cfg: CollisionConfig, bar: Any, stop:
     return total / max(seen, 1)
 
 
+def _fit_epochs(
+    fit: _Fit,
+    data: dict[str, SplitData],
+    cfg: CollisionConfig,
+    bar: Any,
+    folder: RunDir | None,
+    train_time: Callable[[], float],
+) -> None:
+    """The epochs after ``fit.epoch`` up to ``cfg.epochs``, each validated (the best model
+    kept in ``fit``); stops early when validation stops improving (``cfg.patience``) or on
+    Ctrl-C (after the current gradient step)."""
+    model = fit.model
+    with CtrlC() as stop:
+        for ep in range(fit.epoch + 1, cfg.epochs + 1):
+            if cfg.patience and ep - fit.best_epoch > cfg.patience and fit.best_epoch:
+                break  # validation has stopped improving
+            _set_lr(fit.opt, cfg, ep)
+            loss = _train_epoch(fit, data["train"], cfg, bar, stop)
+            if loss is None:
+                break
+            val = accuracy_report(predict(model, data["val"]), data["val"].samples, cfg.label, cfg.band)
+            row = {
+                "epoch": ep,
+                "train_loss": loss,
+                "val_accuracy": val["accuracy"],
+                "val_accuracy_near": val["accuracy_near"],
+                "wall_time_s": train_time(),
+            }
+            fit.epoch = ep
+            fit.history.append(row)
+            if folder is not None:
+                folder.log(row)
+            if val["accuracy"] > fit.best_acc:
+                fit.best_acc, fit.best_epoch = val["accuracy"], ep
+                fit.best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+            if bar is not None:
+                bar.set_postfix(loss=f"{loss:.3f}", val=f"{val['accuracy']:.3f}", best=f"{fit.best_acc:.3f}")
+            if stop():
+                break
+
+
 def train_classifier(
     cfg: CollisionConfig,
     run_dir: str | Path | None = None,
@@ -545,7 +646,11 @@ def train_classifier(
     the current gradient step: with ``run_dir`` the trainer state goes to ``last.pt``
     (``resume`` continues from it; ``queue``, the observations the command trains after
     this one, is kept there too); the result says it was interrupted and nothing is tested."""
-    folder = RunDir(run_dir, "pointplan collision-classify", f"{cfg.observation}_metrics.csv", f"tb/{cfg.observation}") if run_dir is not None else None
+    folder = (
+        RunDir(run_dir, "pointplan collision-classify", f"{cfg.observation}_metrics.csv", f"tb/{cfg.observation}")
+        if run_dir is not None
+        else None
+    )
     torch.manual_seed(cfg.seed)
     robot = make_scenario(cfg.env).robot
     t0 = time.perf_counter()
@@ -554,10 +659,14 @@ def train_classifier(
     data = {name: _tensors(cfg, samples[name], robot, k) for k, name in enumerate(SAMPLE_SETS)}
     t_data = time.perf_counter() - t0
     obs_shape = tuple(data["train"].obs.shape[1:])
-    model = CollisionClassifier(obs_shape, EncoderConfig(kind=cfg.encoder_kind, width=cfg.width, layers=3), robot.twist_dim, cfg.width, 3).to(
-        torch.device(cfg.device)
+    model = CollisionClassifier(
+        obs_shape, EncoderConfig(kind=cfg.encoder_kind, width=cfg.width, layers=3), robot.twist_dim, cfg.width, 3
+    ).to(torch.device(cfg.device))
+    fit = _Fit(
+        model,
+        torch.optim.Adam(model.parameters(), lr=cfg.lr),
+        np.random.default_rng(np.random.SeedSequence([cfg.seed, 0x7EA1])),
     )
-    fit = _Fit(model, torch.optim.Adam(model.parameters(), lr=cfg.lr), np.random.default_rng(np.random.SeedSequence([cfg.seed, 0x7EA1])))
     if resume is not None:
         fit.resume(resume)
         if folder is not None:
@@ -567,41 +676,35 @@ def train_classifier(
         from tqdm import tqdm
 
         steps = int(np.ceil(len(data["train"].label) / cfg.batch_size))
-        bar = tqdm(total=cfg.epochs * steps, initial=fit.epoch * steps, desc=f"{cfg.observation} classifier", unit="step", dynamic_ncols=True)
+        bar = tqdm(
+            total=cfg.epochs * steps,
+            initial=fit.epoch * steps,
+            desc=f"{cfg.observation} classifier",
+            unit="step",
+            dynamic_ncols=True,
+        )
     t1 = time.perf_counter()
     train_time = lambda: fit.train_before + time.perf_counter() - t1
-    with CtrlC() as stop:
-        for ep in range(fit.epoch + 1, cfg.epochs + 1):
-            if cfg.patience and ep - fit.best_epoch > cfg.patience and fit.best_epoch:
-                break  # validation has stopped improving
-            _set_lr(fit.opt, cfg, ep)
-            loss = _train_epoch(fit, data["train"], cfg, bar, stop)
-            if loss is None:
-                break
-            val = accuracy_report(predict(model, data["val"]), data["val"].samples, cfg.label, cfg.band)
-            row = {"epoch": ep, "train_loss": loss, "val_accuracy": val["accuracy"], "val_accuracy_near": val["accuracy_near"], "wall_time_s": train_time()}
-            fit.epoch = ep
-            fit.history.append(row)
-            if folder is not None:
-                folder.log(row)
-            if val["accuracy"] > fit.best_acc:
-                fit.best_acc, fit.best_epoch = val["accuracy"], ep
-                fit.best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
-            if bar is not None:
-                bar.set_postfix(loss=f"{loss:.3f}", val=f"{val['accuracy']:.3f}", best=f"{fit.best_acc:.3f}")
-            if stop():
-                break
+    _fit_epochs(fit, data, cfg, bar, folder, train_time)
     if bar is not None:
         bar.close()
     stopped_early = bool(cfg.patience) and fit.epoch - fit.best_epoch >= cfg.patience and fit.best_epoch > 0
-    res = CollisionResult(model, fit.history, fit.best_epoch, {}, {}, 0.0, t_data, fit.epoch < cfg.epochs and not stopped_early)
+    res = CollisionResult(
+        model, fit.history, fit.best_epoch, {}, {}, 0.0, t_data, fit.epoch < cfg.epochs and not stopped_early
+    )
     res.extra["obs_shape"] = list(obs_shape)
     if res.interrupted:
         res.train_time_s = train_time()
         if folder is not None:
-            note = f"best validation accuracy {fit.best_acc:.3f} at epoch {fit.best_epoch}" if fit.best_state is not None else "no validation yet"
+            note = (
+                f"best validation accuracy {fit.best_acc:.3f} at epoch {fit.best_epoch}"
+                if fit.best_state is not None
+                else "no validation yet"
+            )
             folder.interrupted(
-                f"in epoch {fit.epoch + 1} of {cfg.epochs}", lambda: folder.save("last.pt", fit.state(cfg, list(obs_shape), queue, res.train_time_s)), note
+                f"in epoch {fit.epoch + 1} of {cfg.epochs}",
+                lambda: folder.save("last.pt", fit.state(cfg, list(obs_shape), queue, res.train_time_s)),
+                note,
             )
         return res
     res.train_time_s = train_time()
@@ -609,7 +712,12 @@ def train_classifier(
 
 
 def _test_classifier(
-    cfg: CollisionConfig, res: CollisionResult, fit: _Fit, data: dict[str, SplitData], samples: dict[str, CollisionSamples], folder: RunDir | None
+    cfg: CollisionConfig,
+    res: CollisionResult,
+    fit: _Fit,
+    data: dict[str, SplitData],
+    samples: dict[str, CollisionSamples],
+    folder: RunDir | None,
 ) -> CollisionResult:
     """The best epoch's classifier on validation and test samples; saved with ``folder``."""
     assert fit.best_state is not None
@@ -624,7 +732,9 @@ def _test_classifier(
     res.test["uniform"] = uniform
     if cfg.label == "end":  # the same predictions against the swept-move label
         res.extra["test_vs_swept_label"] = accuracy_report(res.test_pred, samples["test"], "swept", cfg.band)
-        res.extra["test_labels_differ"] = float(np.mean(samples["test"].labels("end") != samples["test"].labels("swept")))
+        res.extra["test_labels_differ"] = float(
+            np.mean(samples["test"].labels("end") != samples["test"].labels("swept"))
+        )
     res.extra["parameters"] = int(sum(p.numel() for p in model.parameters()))
     if folder is not None:
         save_classifier(folder.path, cfg, res, folder)
@@ -636,11 +746,21 @@ def save_classifier(run_dir: Path, cfg: CollisionConfig, res: CollisionResult, f
     """``<observation>.pt`` (weights, config, shape), ``<observation>.json`` (summary) and
     ``<observation>_test.npz`` (the test predictions), each written atomically."""
     folder = folder or RunDir(run_dir, "pointplan collision-classify")
-    folder.save_torch(f"{cfg.observation}.pt", {"config": to_dict(cfg), "obs_shape": res.extra["obs_shape"], "model": res.model.state_dict()})
+    folder.save_torch(
+        f"{cfg.observation}.pt",
+        {"config": to_dict(cfg), "obs_shape": res.extra["obs_shape"], "model": res.model.state_dict()},
+    )
     folder.write_json(f"{cfg.observation}.json", res.summary(cfg))
     if res.test_pred is not None and res.test_samples is not None:
         t = res.test_samples
-        arrays = {"pred": res.test_pred, "end_clearance": t.end_clearance, "swept_clearance": t.swept_clearance, "scene": t.scene, "q": t.q, "action": t.action}
+        arrays = {
+            "pred": res.test_pred,
+            "end_clearance": t.end_clearance,
+            "swept_clearance": t.swept_clearance,
+            "scene": t.scene,
+            "q": t.q,
+            "action": t.action,
+        }
         atomic_write(folder.path / f"{cfg.observation}_test.npz", lambda tmp: _savez(tmp, arrays))
 
 
@@ -680,5 +800,7 @@ def grid_predictions(
     samples = CollisionSamples([scene], np.zeros(len(q), np.int64), q, a, end, ce, cs)
     rng = np.random.default_rng(seed)
     obs = observe_samples(samples, robot, cfg.observation, cfg.n_points, rng)
-    data = SplitData(samples, torch.as_tensor(obs), torch.as_tensor(a), torch.as_tensor(samples.labels(cfg.label).astype(np.float32)))
+    data = SplitData(
+        samples, torch.as_tensor(obs), torch.as_tensor(a), torch.as_tensor(samples.labels(cfg.label).astype(np.float32))
+    )
     return {"q": q, "end": end, "truth": samples.labels(cfg.label), "pred": predict(model, data)}

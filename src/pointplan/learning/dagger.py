@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -42,6 +42,11 @@ from .bc import (
     save_demos,
 )
 from .rundir import RunDir, best_or_none, load_trainer_state, say_interrupted_early
+
+if TYPE_CHECKING:
+    from ..planners.base import PlanResult
+    from ..scenes.scene import Problem
+    from .bc import DemoPool
 
 
 @dataclass(frozen=True)
@@ -74,7 +79,7 @@ def _rollout_index(seed: int, rnd: int, rollouts: int, i: int) -> int:
     return 2_000_000 + seed * 100_000_000 + rnd * rollouts + i
 
 
-def _label_jobs(cfg: DaggerConfig, scenario: Scenario, rnd: int, results: list[Any]) -> list[DemoJob]:
+def _label_jobs(cfg: DaggerConfig, scenario: Scenario, rnd: int, results: list[PlanResult]) -> list[DemoJob]:
     """Expert queries at evenly spaced states of every failed rollout."""
     robot_name = scenario.robot.name if scenario.robot.dim == 3 else None
     jobs: list[DemoJob] = []
@@ -84,11 +89,26 @@ def _label_jobs(cfg: DaggerConfig, scenario: Scenario, rnd: int, results: list[A
         k = min(cfg.labels_per_failure, len(res.path))
         index = _rollout_index(cfg.bc.seed, rnd, cfg.rollouts, i)
         for j in np.unique(np.linspace(0, len(res.path) - 1, k).round().astype(int)):
-            jobs.append((scenario.name, robot_name, "train", index, cfg.bc.seed, index * 100 + int(j), cfg.max_nodes, res.path[j].copy(), 1, 0.0))
+            jobs.append(
+                (
+                    scenario.name,
+                    robot_name,
+                    "train",
+                    index,
+                    cfg.bc.seed,
+                    index * 100 + int(j),
+                    cfg.max_nodes,
+                    res.path[j].copy(),
+                    1,
+                    0.0,
+                )
+            )
     return jobs
 
 
-def _validate(policy: Policy, scenario: Scenario, env: EnvConfig, problems: list[Any], seed: int) -> tuple[float, float]:
+def _validate(
+    policy: Policy, scenario: Scenario, env: EnvConfig, problems: list[Problem], seed: int
+) -> tuple[float, float]:
     from ..planners.rollout import rollout_batch
 
     res = rollout_batch(policy, scenario.robot, env, problems, scenario.horizon, seed=seed)
@@ -96,7 +116,11 @@ def _validate(policy: Policy, scenario: Scenario, env: EnvConfig, problems: list
 
 
 def _threading_labels(
-    scenario: Scenario, labels: Sequence[tuple[int, int, np.ndarray | None]], progress: bool, desc: str, copies: bool = False
+    scenario: Scenario,
+    labels: Sequence[tuple[int, int, np.ndarray | None]],
+    progress: bool,
+    desc: str,
+    copies: bool = False,
 ) -> list[tuple[int, np.ndarray]]:
     """The slot threading expert's paths, cut into policy steps, for ``(problem index in the
     training split, planner seed, start or None)``; the unsolved ones are left out. It takes
@@ -119,7 +143,9 @@ def _threading_labels(
     return out
 
 
-def first_demos(cfg: DaggerConfig, scenario: Scenario, demos_path: Path, progress: bool, pool: Any = None) -> Demos:
+def first_demos(
+    cfg: DaggerConfig, scenario: Scenario, demos_path: Path, progress: bool, pool: DemoPool | None = None
+) -> Demos:
     """The cloning demonstrations (from ``cfg.bc.demos_file`` when it exists, else planned by
     ``cfg.expert``, Bi-RRT on ``pool`` if given), also written to ``demos_path``."""
     b = cfg.bc
@@ -130,28 +156,43 @@ def first_demos(cfg: DaggerConfig, scenario: Scenario, demos_path: Path, progres
         from .bc import _demo_index
 
         jobs = [(_demo_index(b.seed, b.n_problems, i), b.seed, None) for i in range(b.n_problems)]
-        paths = _threading_labels(scenario, jobs, progress, "demonstrations", copies=cfg.expert == "slot-threading-copies")
+        paths = _threading_labels(
+            scenario, jobs, progress, "demonstrations", copies=cfg.expert == "slot-threading-copies"
+        )
         demos = demos_from_paths(scenario, "train", b.seed, paths)
     else:
-        demos = generate_demos(scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address, pool=pool)
+        demos = generate_demos(
+            scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address, pool=pool
+        )
     save_demos(demos_path, scenario, demos, "train", b.seed)
     return demos
 
 
 def _roll_out_and_label(
-    cfg: DaggerConfig, scenario: Scenario, policy: Policy, env: EnvConfig, rnd: int, pool: Any, progress: bool
-) -> tuple[list[Any], list[Any]]:
+    cfg: DaggerConfig,
+    scenario: Scenario,
+    policy: Policy,
+    env: EnvConfig,
+    rnd: int,
+    pool: DemoPool | None,
+    progress: bool,
+) -> tuple[list[PlanResult], list[tuple[int, np.ndarray]]]:
     """Round ``rnd``'s rollouts of the policy on fresh training problems, and the expert's
     paths from states of the failed ones."""
     from ..planners.rollout import rollout_batch
 
     b = cfg.bc
-    probs = [scenario.problem("train", _rollout_index(b.seed, rnd, cfg.rollouts, i), seed=b.seed) for i in range(cfg.rollouts)]
+    probs = [
+        scenario.problem("train", _rollout_index(b.seed, rnd, cfg.rollouts, i), seed=b.seed)
+        for i in range(cfg.rollouts)
+    ]
     results = rollout_batch(policy, scenario.robot, env, probs, scenario.horizon, seed=b.seed * 1000 + rnd)
     jobs = _label_jobs(cfg, scenario, rnd, results)
     if cfg.expert.startswith("slot-threading"):
         labels = [(j[3], j[4], j[7]) for j in jobs]
-        return results, _threading_labels(scenario, labels, progress, f"round {rnd + 1}: expert labels", copies=cfg.expert == "slot-threading-copies")
+        return results, _threading_labels(
+            scenario, labels, progress, f"round {rnd + 1}: expert labels", copies=cfg.expert == "slot-threading-copies"
+        )
     return results, plan_demos(jobs, pool, progress, desc=f"round {rnd + 1}: expert labels")
 
 
@@ -166,7 +207,15 @@ def _print_round(row: dict[str, Any], best: float) -> None:
 class _DaggerRun:
     """The pieces of a DAgger run and its counters (built by :func:`train_dagger`)."""
 
-    def __init__(self, cfg: DaggerConfig, folder: RunDir, progress: bool, init_actor: str | None, resume: str | Path | None, pool: Any) -> None:
+    def __init__(
+        self,
+        cfg: DaggerConfig,
+        folder: RunDir,
+        progress: bool,
+        init_actor: str | None,
+        resume: str | Path | None,
+        pool: DemoPool | None,
+    ) -> None:
         b = cfg.bc
         self.cfg, self.folder = cfg, folder
         self.scenario = make_scenario(b.env, robot=b.robot)
@@ -232,7 +281,9 @@ class _DaggerRun:
             )
             self.clone_done = len(self.clone_losses) >= b.epochs
 
-    def play_round(self, rnd: int, pool: Any, progress: bool, stop: Callable[[], bool]) -> dict[str, Any] | None:
+    def play_round(
+        self, rnd: int, pool: DemoPool | None, progress: bool, stop: Callable[[], bool]
+    ) -> dict[str, Any] | None:
         """Round ``rnd``: roll out, label, refit, validate, log and save; None when ``stop``
         ended it early (the round is played again on resume)."""
         cfg, b = self.cfg, self.cfg.bc
@@ -244,7 +295,19 @@ class _DaggerRun:
         save_demos(self.demos_path, self.scenario, self.demos, "train", b.seed)
         self.actor.train()
         losses = fit_actor(
-            self.actor, self.opt, self.demos, self.robot, self.env, cfg.epochs_per_round, b.batch_size, self.rng, 1, progress, b.spread_weight, None, stop
+            self.actor,
+            self.opt,
+            self.demos,
+            self.robot,
+            self.env,
+            cfg.epochs_per_round,
+            b.batch_size,
+            self.rng,
+            1,
+            progress,
+            b.spread_weight,
+            None,
+            stop,
         )
         if stop():
             return None
@@ -279,16 +342,33 @@ class _DaggerRun:
             "wall_time_s": wall,
             "round": self.round,
         }
-        counters = {"round": self.round, "best": self.best, "best_nodes": self.best_nodes, "wall_time_s": wall, "env_steps": self.env_steps}
+        counters = {
+            "round": self.round,
+            "best": self.best,
+            "best_nodes": self.best_nodes,
+            "wall_time_s": wall,
+            "env_steps": self.env_steps,
+        }
         clone = {"clone_losses": list(self.clone_losses), "clone_done": self.clone_done}
-        state = {**counters, **clone, "optimizer": self.opt.state_dict(), "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state()}
+        state = {
+            **counters,
+            **clone,
+            "optimizer": self.opt.state_dict(),
+            "rng": self.rng.bit_generator.state,
+            "torch_rng": torch.get_rng_state(),
+        }
         self.folder.save("last.pt", {**payload, "dagger": state})
         if improved:
             self.folder.save("best.pt", payload)
 
 
 def train_dagger(
-    cfg: DaggerConfig, run_dir: str | Path, progress: bool = True, init_actor: str | None = None, resume: str | Path | None = None, pool: Any = None
+    cfg: DaggerConfig,
+    run_dir: str | Path,
+    progress: bool = True,
+    init_actor: str | None = None,
+    resume: str | Path | None = None,
+    pool: DemoPool | None = None,
 ) -> dict[str, Any]:
     """Behavioural cloning (from ``init_actor`` if given, else fitted here), then
     ``cfg.rounds`` DAgger rounds; checkpoints ``best.pt`` and ``last.pt`` (resumable, also
@@ -316,10 +396,20 @@ def train_dagger(
     finally:
         if own and pool is not None:
             pool.shutdown(cancel_futures=True)
-    interrupted = stop.requested and not (run.clone_done and run.round >= cfg.rounds)  # (not when it came after the last round)
+    # (not when it came after the last round)
+    interrupted = stop.requested and not (run.clone_done and run.round >= cfg.rounds)
     if interrupted:
-        where = f"in round {run.round + 1} of {cfg.rounds}" if run.clone_done else f"while cloning, in epoch {len(run.clone_losses) + 1} of {cfg.bc.epochs}"
+        where = (
+            f"in round {run.round + 1} of {cfg.rounds}"
+            if run.clone_done
+            else f"while cloning, in epoch {len(run.clone_losses) + 1} of {cfg.bc.epochs}"
+        )
         folder.interrupted(where, lambda: run.save({}))
     folder.close()
-    summary = {"run_dir": str(folder.path), "best_success": best_or_none(run.best), "demo_steps": len(run.demos), "wall_time_s": run.wall}
+    summary = {
+        "run_dir": str(folder.path),
+        "best_success": best_or_none(run.best),
+        "demo_steps": len(run.demos),
+        "wall_time_s": run.wall,
+    }
     return {**summary, "interrupted": interrupted}

@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -30,7 +30,17 @@ from ..models.cvae import POINT_SPACING, CVAEConfig, LearnedSamplerNet, normalis
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from .bc import Demos, generate_demos, load_demos, save_demos
-from .rundir import RunDir, epoch_range, load_trainer_state, optimizer_and_random_state, restore_optimizer_and_random_state, say_interrupted_early
+from .rundir import (
+    RunDir,
+    epoch_range,
+    load_trainer_state,
+    optimizer_and_random_state,
+    restore_optimizer_and_random_state,
+    say_interrupted_early,
+)
+
+if TYPE_CHECKING:
+    from .bc import DemoPool
 
 
 @dataclass(frozen=True)
@@ -99,7 +109,9 @@ def resample_by_length(path: np.ndarray, spacing: float) -> np.ndarray:
     return np.stack([np.interp(s, cum, path[:, k]) for k in range(path.shape[1])], -1)
 
 
-def path_set(demos: Demos, robot: Robot, low: np.ndarray, high: np.ndarray, spacing: float, n_points: int | None = None) -> PathSet:
+def path_set(
+    demos: Demos, robot: Robot, low: np.ndarray, high: np.ndarray, spacing: float, n_points: int | None = None
+) -> PathSet:
     """The data of :func:`train_lsample` from demonstrations (one solution per problem)."""
     if robot.config_dim != robot.dim:
         raise ValueError(f"learned sampling samples positions: robot {robot.name} has orientations")
@@ -131,7 +143,9 @@ def _batch(data: PathSet, rows: np.ndarray, k: int, rng: np.random.Generator) ->
     return t(data.clouds[rows]), t(data.ends[rows, :dim]), t(data.ends[rows, dim:]), t(data.configs[pick.reshape(-1)])
 
 
-def batch_loss(net: LearnedSamplerNet, batch: tuple[torch.Tensor, ...], k: int, kl_weight: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def batch_loss(
+    net: LearnedSamplerNet, batch: tuple[torch.Tensor, ...], k: int, kl_weight: float
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     clouds, start, goal, x = batch
     c = net.condition(clouds, start, goal).repeat_interleave(k, 0)
     y = net.to_target(x, start.repeat_interleave(k, 0), goal.repeat_interleave(k, 0))
@@ -157,7 +171,9 @@ def validation_loss(net: LearnedSamplerNet, data: PathSet, cfg: LSampleConfig) -
 
 
 @torch.no_grad()
-def near_fraction(net: LearnedSamplerNet, data: PathSet, rng: np.random.Generator, n: int = 64, radius: float = 0.1) -> float:
+def near_fraction(
+    net: LearnedSamplerNet, data: PathSet, rng: np.random.Generator, n: int = 64, radius: float = 0.1
+) -> float:
     """How many of the decoder's samples (latents from the prior) lie within ``radius``
     (normalised units: 0.05 in the unit square) of their problem's solution, on average
     over the problems of ``data`` (uniform samples: about 15% for a solution 0.75 long)."""
@@ -168,7 +184,11 @@ def near_fraction(net: LearnedSamplerNet, data: PathSet, rng: np.random.Generato
         c = net.condition(clouds, start, goal).repeat_interleave(n, 0)
         z = torch.from_numpy(rng.standard_normal((len(c), net.cvae.latent)).astype(np.float32))
         y = net.cvae.decode(z, c)
-        x = net.from_target(y, start.repeat_interleave(n, 0), goal.repeat_interleave(n, 0)).numpy().reshape(len(rows), n, -1)
+        x = (
+            net.from_target(y, start.repeat_interleave(n, 0), goal.repeat_interleave(n, 0))
+            .numpy()
+            .reshape(len(rows), n, -1)
+        )
         for k, r in enumerate(rows):
             path = data.configs[data.offsets[r] : data.offsets[r] + data.counts[r]]
             d = np.min(np.linalg.norm(x[k][:, None] - path[None], axis=-1), axis=1)
@@ -176,7 +196,9 @@ def near_fraction(net: LearnedSamplerNet, data: PathSet, rng: np.random.Generato
     return float(np.mean(hits))
 
 
-def sampler_payload(cfg: LSampleConfig, robot: Robot, net: LearnedSamplerNet, low: np.ndarray, high: np.ndarray, **extra: Any) -> dict[str, Any]:
+def sampler_payload(
+    cfg: LSampleConfig, robot: Robot, net: LearnedSamplerNet, low: np.ndarray, high: np.ndarray, **extra: Any
+) -> dict[str, Any]:
     """What a sampler checkpoint holds (:class:`~pointplan.planners.learned_sampling.LearnedSampler` reads it)."""
     from ..planners.learned_sampling import CHECKPOINT_KIND
 
@@ -194,7 +216,9 @@ def sampler_payload(cfg: LSampleConfig, robot: Robot, net: LearnedSamplerNet, lo
     }
 
 
-def plan_validation(checkpoint: Path, scenario: Scenario, n: int, seed: int, lams: tuple[float, ...] = (0.5, 0.9)) -> dict[str, dict[str, Any]]:
+def plan_validation(
+    checkpoint: Path, scenario: Scenario, n: int, seed: int, lams: tuple[float, ...] = (0.5, 0.9)
+) -> dict[str, dict[str, Any]]:
     """Metrics of the learned-sampling planner at each ``lam`` on validation problems
     ``0..n-1`` (problem seed 0, planner seed ``seed``)."""
     from ..evaluation import evaluate
@@ -211,12 +235,23 @@ def plan_validation(checkpoint: Path, scenario: Scenario, n: int, seed: int, lam
     return out
 
 
-def _demos(scenario: Scenario, cfg: LSampleConfig, split: str, n: int, file: str | None, progress: bool, pool: Any = None, keep: Path | None = None) -> Demos:
+def _demos(
+    scenario: Scenario,
+    cfg: LSampleConfig,
+    split: str,
+    n: int,
+    file: str | None,
+    progress: bool,
+    pool: DemoPool | None = None,
+    keep: Path | None = None,
+) -> Demos:
     """The demonstrations of ``split``: ``file``'s if it exists, else planned and written to
     ``file`` (or ``keep``, the run folder's copy a resumed run reads back)."""
     if file and Path(file).exists():
         return load_demos(file, scenario)
-    demos = generate_demos(scenario, n, cfg.seed, cfg.max_nodes, progress=progress, split=split, workers=cfg.workers, pool=pool)
+    demos = generate_demos(
+        scenario, n, cfg.seed, cfg.max_nodes, progress=progress, split=split, workers=cfg.workers, pool=pool
+    )
     if file or keep:
         save_demos(file or str(keep), scenario, demos, split, cfg.seed)
     return demos
@@ -225,7 +260,9 @@ def _demos(scenario: Scenario, cfg: LSampleConfig, split: str, n: int, file: str
 class _LSampleRun:
     """The data, the network and the counters of a learned-sampler training run (see :func:`train_lsample`)."""
 
-    def __init__(self, cfg: LSampleConfig, folder: RunDir, progress: bool, pool: Any, resume: str | Path | None) -> None:
+    def __init__(
+        self, cfg: LSampleConfig, folder: RunDir, progress: bool, pool: DemoPool | None, resume: str | Path | None
+    ) -> None:
         self.cfg, self.folder = cfg, folder
         self.scenario = make_scenario(cfg.env)
         self.robot = self.scenario.robot
@@ -286,7 +323,12 @@ class _LSampleRun:
         perm = self.rng.permutation(len(train))
         tot, nb = 0.0, 0
         for s in range(0, len(perm), cfg.batch_problems):
-            loss, _, _ = batch_loss(self.net, _batch(train, perm[s : s + cfg.batch_problems], cfg.per_problem, self.rng), cfg.per_problem, cfg.kl_weight)
+            loss, _, _ = batch_loss(
+                self.net,
+                _batch(train, perm[s : s + cfg.batch_problems], cfg.per_problem, self.rng),
+                cfg.per_problem,
+                cfg.kl_weight,
+            )
             self.opt.zero_grad(set_to_none=True)
             loss.backward()
             self.opt.step()
@@ -315,7 +357,13 @@ class _LSampleRun:
             self.folder.save("best.pt", self.payload(val=_plain(row)))
 
 
-def train_lsample(cfg: LSampleConfig, run_dir: str | Path, progress: bool = True, pool: Any = None, resume: str | Path | None = None) -> dict[str, Any]:
+def train_lsample(
+    cfg: LSampleConfig,
+    run_dir: str | Path,
+    progress: bool = True,
+    pool: DemoPool | None = None,
+    resume: str | Path | None = None,
+) -> dict[str, Any]:
     """Plan the data (or load it; Bi-RRT on ``pool`` if given), fit the CVAE, select the
     epoch on validation problems; writes ``best.pt``, ``last.pt`` (the trainer state, also
     on Ctrl-C; ``resume`` continues from it), ``metrics.csv`` and TensorBoard logs to
@@ -337,7 +385,11 @@ def train_lsample(cfg: LSampleConfig, run_dir: str | Path, progress: bool = True
             run.rows.append(row)
             folder.log(row)
             if progress:
-                post = {"loss": f"{row['train_loss']:.4f}", "val": f"{row['val_loss']:.4f}", "near": f"{row['val_near']:.3f}"}
+                post = {
+                    "loss": f"{row['train_loss']:.4f}",
+                    "val": f"{row['val_loss']:.4f}",
+                    "near": f"{row['val_near']:.3f}",
+                }
                 if run.best is not None:
                     post["best_nodes_0.9"] = f"{run.best[0]:.1f}@{run.best[1]}"
                 epochs.set_postfix(post)
@@ -345,7 +397,12 @@ def train_lsample(cfg: LSampleConfig, run_dir: str | Path, progress: bool = True
                 break
     if progress:
         epochs.close()
-    summary = {"run_dir": str(folder.path), "epochs": run.epoch, "data_time_s": run.data_time, "interrupted": run.epoch < cfg.epochs}
+    summary = {
+        "run_dir": str(folder.path),
+        "epochs": run.epoch,
+        "data_time_s": run.data_time,
+        "interrupted": run.epoch < cfg.epochs,
+    }
     if summary["interrupted"]:
         folder.interrupted(f"in epoch {run.epoch + 1} of {cfg.epochs}", run.save_last)
     else:
@@ -369,4 +426,12 @@ def _plain(row: dict[str, Any]) -> dict[str, Any]:
     return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in row.items()}
 
 
-__all__ = ["LSampleConfig", "PathSet", "path_set", "plan_validation", "resample_by_length", "sampler_payload", "train_lsample"]
+__all__ = [
+    "LSampleConfig",
+    "PathSet",
+    "path_set",
+    "plan_validation",
+    "resample_by_length",
+    "sampler_payload",
+    "train_lsample",
+]

@@ -30,7 +30,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -52,7 +52,17 @@ from ..planners.mpnet import MPNetPlanner, scene_points
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from .bc import Demos, generate_demos, load_demos, save_demos
-from .rundir import RunDir, epoch_range, load_trainer_state, optimizer_and_random_state, restore_optimizer_and_random_state, say_interrupted_early
+from .rundir import (
+    RunDir,
+    epoch_range,
+    load_trainer_state,
+    optimizer_and_random_state,
+    restore_optimizer_and_random_state,
+    say_interrupted_early,
+)
+
+if TYPE_CHECKING:
+    from .bc import DemoPool
 
 
 @dataclass(frozen=True)
@@ -145,7 +155,13 @@ class PathSet:
 
 
 def make_path_set(
-    demos: Demos, robot: Robot, center: np.ndarray, step: float, waypoint_step: float, observation: str | None = None, n_points: int = 0
+    demos: Demos,
+    robot: Robot,
+    center: np.ndarray,
+    step: float,
+    waypoint_step: float,
+    observation: str | None = None,
+    n_points: int = 0,
 ) -> PathSet:
     """The training (or validation) paths of ``demos``."""
     ins: list[np.ndarray] = []
@@ -171,7 +187,9 @@ def make_path_set(
     return PathSet(torch.as_tensor(padded), np.concatenate(wps), np.array(offset), np.array(length), np.array(demo))
 
 
-def batch_samples(ps: PathSet, demos_idx: np.ndarray, rng: np.random.Generator | None, subgoal_prob: float) -> tuple[np.ndarray, ...]:
+def batch_samples(
+    ps: PathSet, demos_idx: np.ndarray, rng: np.random.Generator | None, subgoal_prob: float
+) -> tuple[np.ndarray, ...]:
     """Samples of the directed paths of demonstrations ``demos_idx``: current, next, goal
     waypoint indices and the batch-local scene index. ``rng is None``: every goal is the end."""
     local = {int(d): k for k, d in enumerate(demos_idx)}
@@ -193,7 +211,13 @@ def batch_samples(ps: PathSet, demos_idx: np.ndarray, rng: np.random.Generator |
 
 
 def batch_loss(
-    model: MPNetModel, ps: PathSet, demos_idx: np.ndarray, center: np.ndarray, step: float, rng: np.random.Generator | None, subgoal_prob: float
+    model: MPNetModel,
+    ps: PathSet,
+    demos_idx: np.ndarray,
+    center: np.ndarray,
+    step: float,
+    rng: np.random.Generator | None,
+    subgoal_prob: float,
 ) -> tuple[torch.Tensor, int]:
     """Mean squared error (sum over coordinates) of the batch; and its number of samples."""
     cur, nxt, goal, scene = batch_samples(ps, demos_idx, rng, subgoal_prob)
@@ -201,7 +225,9 @@ def batch_loss(
     q = ps.waypoints[cur]
     target = torch.as_tensor(((ps.waypoints[nxt] - q) / step).astype(np.float32))
     pred = model(
-        z[torch.as_tensor(scene)], torch.as_tensor(scale_positions(q, center, step)), torch.as_tensor(scale_positions(ps.waypoints[goal], center, step))
+        z[torch.as_tensor(scene)],
+        torch.as_tensor(scale_positions(q, center, step)),
+        torch.as_tensor(scale_positions(ps.waypoints[goal], center, step)),
     )
     return ((pred - target) ** 2).sum(-1).mean(), len(cur)
 
@@ -220,7 +246,14 @@ def validation_loss(model: MPNetModel, ps: PathSet, center: np.ndarray, step: fl
 
 
 def _demos(
-    scenario: Scenario, n: int, split: str, path: str | None, cfg: MPNetTrainConfig, progress: bool, pool: Any = None, keep: Path | None = None
+    scenario: Scenario,
+    n: int,
+    split: str,
+    path: str | None,
+    cfg: MPNetTrainConfig,
+    progress: bool,
+    pool: DemoPool | None = None,
+    keep: Path | None = None,
 ) -> Demos:
     """The demonstrations of ``split``: ``path``'s if it exists, else planned and written to
     ``path`` (or ``keep``, the run folder's copy a resumed run reads back)."""
@@ -254,7 +287,9 @@ class MPNetTrainResult:
 class _MPNetRun:
     """The data, the network and the counters of an MPNet training run (see :func:`train_mpnet`)."""
 
-    def __init__(self, cfg: MPNetTrainConfig, folder: RunDir, progress: bool, pool: Any, resume: str | Path | None) -> None:
+    def __init__(
+        self, cfg: MPNetTrainConfig, folder: RunDir, progress: bool, pool: DemoPool | None, resume: str | Path | None
+    ) -> None:
         self.cfg, self.folder = cfg, folder
         torch.manual_seed(cfg.seed)
         self.rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0x3B9E7]))
@@ -269,16 +304,28 @@ class _MPNetRun:
         t0 = time.perf_counter()
         self.train_demos = self._demos(cfg.n_problems, "train", cfg.demos_file, progress, pool, resume is not None)
         val_demos = self._demos(cfg.val_demo_problems, "val", cfg.val_demos_file, progress, pool, resume is not None)
-        self.train_set = make_path_set(self.train_demos, robot, self.center, self.step, cfg.waypoint_step, self.observation, self.n_points)
-        self.val_set = make_path_set(val_demos, robot, self.center, self.step, cfg.waypoint_step, self.observation, self.n_points)
+        self.train_set = make_path_set(
+            self.train_demos, robot, self.center, self.step, cfg.waypoint_step, self.observation, self.n_points
+        )
+        self.val_set = make_path_set(
+            val_demos, robot, self.center, self.step, cfg.waypoint_step, self.observation, self.n_points
+        )
         self.val_problems = self.scenario.problems("val", cfg.val_problems, seed=cfg.seed)
         self.demo_time = time.perf_counter() - t0
         self.model = MPNetModel(robot.dim, 2 * robot.dim, cfg.net)
         self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.lr)
         self.sched = torch.optim.lr_scheduler.LambdaLR(
-            self.opt, lambda e: cfg.lr_end + (1.0 - cfg.lr_end) * 0.5 * (1.0 + float(np.cos(np.pi * min(e / max(cfg.epochs - 1, 1), 1.0))))
+            self.opt,
+            lambda e: (
+                cfg.lr_end
+                + (1.0 - cfg.lr_end) * 0.5 * (1.0 + float(np.cos(np.pi * min(e / max(cfg.epochs - 1, 1), 1.0))))
+            ),
         )
-        self.extra = {"train_config": to_dict(cfg), "demo_problems": len(self.train_demos.paths), "waypoints": int(len(self.train_set.waypoints))}
+        self.extra = {
+            "train_config": to_dict(cfg),
+            "demo_problems": len(self.train_demos.paths),
+            "waypoints": int(len(self.train_set.waypoints)),
+        }
         self.history: list[dict[str, float]] = []
         self.best: tuple[float, float] | None = None
         self.best_val: dict[str, float] = {}
@@ -287,7 +334,9 @@ class _MPNetRun:
             self._resume(resume)
         self.t1 = time.perf_counter()
 
-    def _demos(self, n: int, split: str, path: str | None, progress: bool, pool: Any, resumed: bool) -> Demos:
+    def _demos(
+        self, n: int, split: str, path: str | None, progress: bool, pool: DemoPool | None, resumed: bool
+    ) -> Demos:
         keep = self.folder.path / f"demos_{split}.npz"
         if not path and resumed and keep.exists():  # planned by the run resumed
             path = str(keep)
@@ -309,7 +358,9 @@ class _MPNetRun:
         return self.train_before + time.perf_counter() - self.t1
 
     def snapshot(self) -> MPNet:
-        return MPNet(copy.deepcopy(self.model).eval(), self.robot, self.center, self.step, {}, self.observation, self.n_points)
+        return MPNet(
+            copy.deepcopy(self.model).eval(), self.robot, self.center, self.step, {}, self.observation, self.n_points
+        )
 
     def train_epoch(self, ep: int, stop: Callable[[], bool]) -> dict[str, float] | None:
         """One pass over the training paths; None when ``stop`` ended it early."""
@@ -318,7 +369,15 @@ class _MPNetRun:
         order = self.rng.permutation(self.train_set.n_demos)
         total, n = 0.0, 0
         for s in range(0, len(order), cfg.paths_per_batch):
-            loss, k = batch_loss(self.model, self.train_set, order[s : s + cfg.paths_per_batch], self.center, self.step, self.rng, cfg.subgoal_prob)
+            loss, k = batch_loss(
+                self.model,
+                self.train_set,
+                order[s : s + cfg.paths_per_batch],
+                self.center,
+                self.step,
+                self.rng,
+                cfg.subgoal_prob,
+            )
             self.opt.zero_grad(set_to_none=True)
             loss.backward()
             self.opt.step()
@@ -326,7 +385,12 @@ class _MPNetRun:
             n += k
             if stop():
                 return None
-        row: dict[str, float] = {"epoch": ep, "lr": float(self.opt.param_groups[0]["lr"]), "train_loss": total / max(n, 1), "time_s": self.train_time}
+        row: dict[str, float] = {
+            "epoch": ep,
+            "lr": float(self.opt.param_groups[0]["lr"]),
+            "train_loss": total / max(n, 1),
+            "time_s": self.train_time,
+        }
         self.sched.step()
         self.epoch = ep
         return row
@@ -335,11 +399,18 @@ class _MPNetRun:
         """The validation loss and the neural planner on validation problems; ``best.pt``
         when the epoch is the best so far (success, then validation loss)."""
         row["val_loss"] = validation_loss(self.model, self.val_set, self.center, self.step)
-        report = evaluate(MPNetPlanner(self.snapshot(), self.robot, seed=self.cfg.seed), self.val_problems, self.robot, progress=False)
+        report = evaluate(
+            MPNetPlanner(self.snapshot(), self.robot, seed=self.cfg.seed), self.val_problems, self.robot, progress=False
+        )
         if report.interrupted:  # (a second Ctrl-C): a partial validation selects nothing
             raise KeyboardInterrupt
         m = report.metrics()
-        row.update(val_success=m["success_rate"], val_nodes=m["nodes_mean"], val_checks=m["collision_checks_mean"], val_path_length=m["path_length_mean"])
+        row.update(
+            val_success=m["success_rate"],
+            val_nodes=m["nodes_mean"],
+            val_checks=m["collision_checks_mean"],
+            val_path_length=m["path_length_mean"],
+        )
         key = (row["val_success"], -row["val_loss"])
         if self.best is None or key > self.best:
             self.best, self.best_epoch, self.best_val = key, int(row["epoch"]), dict(row)
@@ -347,7 +418,16 @@ class _MPNetRun:
 
     def payload(self, **extra: Any) -> dict[str, Any]:
         return mpnet_payload(
-            self.model, self.scenario.name, self.robot, self.center, self.step, self.observation, self.n_points, epoch=self.epoch, **self.extra, **extra
+            self.model,
+            self.scenario.name,
+            self.robot,
+            self.center,
+            self.step,
+            self.observation,
+            self.n_points,
+            epoch=self.epoch,
+            **self.extra,
+            **extra,
         )
 
     def save_last(self, **extra: Any) -> None:
@@ -371,12 +451,20 @@ class _MPNetRun:
             best_net = MPNet.from_checkpoint(self.folder.path / "best.pt")
             problems = self.scenario.problems("test", self.cfg.test_problems, seed=self.cfg.seed)
             for hybrid in (False, True):
-                planner = MPNetPlanner(best_net, self.robot, hybrid=hybrid, seed=self.cfg.seed, max_nodes=self.cfg.max_nodes)
+                planner = MPNetPlanner(
+                    best_net, self.robot, hybrid=hybrid, seed=self.cfg.seed, max_nodes=self.cfg.max_nodes
+                )
                 out[planner.name] = evaluate(planner, problems, self.robot, progress=progress).metrics()
         return out
 
 
-def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = True, pool: Any = None, resume: str | Path | None = None) -> MPNetTrainResult:
+def train_mpnet(
+    cfg: MPNetTrainConfig,
+    run_dir: str | Path,
+    progress: bool = True,
+    pool: DemoPool | None = None,
+    resume: str | Path | None = None,
+) -> MPNetTrainResult:
     """Train on the training split, select on the validation split, test once. Writes
     ``best.pt``, ``last.pt`` (the trainer state, also on Ctrl-C; ``resume`` continues from
     it), ``metrics.csv``, TensorBoard logs and ``summary.json`` to ``run_dir``. The
@@ -402,16 +490,22 @@ def train_mpnet(cfg: MPNetTrainConfig, run_dir: str | Path, progress: bool = Tru
             if progress:
                 post = {"loss": f"{row['train_loss']:.3f}"}
                 if "val_success" in row:
-                    post.update(val=f"{row['val_success']:.3f}", best=f"{run.best_val['val_success']:.3f}@{run.best_epoch}")
+                    post.update(
+                        val=f"{row['val_success']:.3f}", best=f"{run.best_val['val_success']:.3f}@{run.best_epoch}"
+                    )
                 epochs.set_postfix(post)
             if stop():
                 break
     if progress:
         epochs.close()
     if run.epoch < cfg.epochs:
-        folder.interrupted(f"in epoch {run.epoch + 1} of {cfg.epochs}", run.save_last, _mpnet_note(run.best_val, run.best_epoch))
+        folder.interrupted(
+            f"in epoch {run.epoch + 1} of {cfg.epochs}", run.save_last, _mpnet_note(run.best_val, run.best_epoch)
+        )
         folder.close()
-        return MPNetTrainResult(folder.path, run.best_epoch, run.best_val, run.history, {}, run.demo_time, run.train_time, interrupted=True)
+        return MPNetTrainResult(
+            folder.path, run.best_epoch, run.best_val, run.history, {}, run.demo_time, run.train_time, interrupted=True
+        )
     return _finish_mpnet(run, progress)
 
 
@@ -421,7 +515,9 @@ def _plain(row: dict[str, Any]) -> dict[str, Any]:
 
 
 def _mpnet_note(best_val: dict[str, float], epoch: int) -> str:
-    return f"best validation success {best_val['val_success']:.3f} at epoch {epoch}" if best_val else "no validation yet"
+    return (
+        f"best validation success {best_val['val_success']:.3f} at epoch {epoch}" if best_val else "no validation yet"
+    )
 
 
 def _finish_mpnet(run: _MPNetRun, progress: bool) -> MPNetTrainResult:
@@ -441,7 +537,9 @@ def _finish_mpnet(run: _MPNetRun, progress: bool) -> MPNetTrainResult:
     }
     run.folder.write_json("summary.json", summary)
     run.folder.close()
-    return MPNetTrainResult(run.folder.path, run.best_epoch, run.best_val, run.history, test, run.demo_time, train_time, summary)
+    return MPNetTrainResult(
+        run.folder.path, run.best_epoch, run.best_val, run.history, test, run.demo_time, train_time, summary
+    )
 
 
 __all__ = ["MPNetTrainConfig", "MPNetTrainResult", "cut_path", "path_vertices", "train_mpnet"]

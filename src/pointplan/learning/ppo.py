@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -136,7 +137,7 @@ class ValueNetwork(nn.Module):
     def __init__(self, obs_shape: tuple[int, ...], goal_dim: int, cfg: NetConfig) -> None:
         super().__init__()
         self.encoder = make_encoder(cfg.encoder, obs_shape)
-        feat = int(getattr(self.encoder, "features_dim"))
+        feat = int(self.encoder.features_dim)  # type: ignore[arg-type]
         self.head = mlp([feat + goal_dim] + [cfg.head_width] * cfg.head_layers + [1])
 
     def forward(self, obs: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
@@ -150,7 +151,9 @@ def gaussian_logp(u: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) ->
     return (-0.5 * z**2 - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
 
 
-def gae(rewards: np.ndarray, values: np.ndarray, next_values: np.ndarray, dones: np.ndarray, gamma: float, lam: float) -> tuple[np.ndarray, np.ndarray]:
+def gae(
+    rewards: np.ndarray, values: np.ndarray, next_values: np.ndarray, dones: np.ndarray, gamma: float, lam: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Advantages and returns of ``(T, E)`` arrays: ``next_values[t]`` is the value of what
     follows step ``t`` (0 after a success, the final state's value after a time limit);
     ``dones[t]`` cuts the sum of TD errors where an episode ended."""
@@ -197,7 +200,9 @@ class PPORun:
         self.core = BatchedCore(self.scenario, cfg.num_envs, self.env_cfg)
         self.obs_shape = tuple(self.core.observer.space.shape)
         if list(self.obs_shape) != list(self.meta["obs_shape"]):
-            raise CheckpointError(f"the initial policy sees observations of shape {self.meta['obs_shape']}, this environment gives {list(self.obs_shape)}")
+            raise CheckpointError(
+                f"the initial policy sees observations of shape {self.meta['obs_shape']}, this environment gives {list(self.obs_shape)}"
+            )
         self.net = from_dict(NetConfig, self.meta["net"])
         self.device = torch.device(cfg.device)
         torch.manual_seed(cfg.seed)
@@ -215,16 +220,7 @@ class PPORun:
         self.elapsed_before = 0.0
         self.recent: list[float] = []
         if resume is not None:
-            if "ppo" not in init:
-                raise CheckpointError(f"{resume}: not a PPO trainer state (resume from a PPO run's last.pt)")
-            st = init["ppo"]
-            self.value.load_state_dict(st["value"])
-            self.opt_actor.load_state_dict(st["opt_actor"])
-            self.opt_value.load_state_dict(st["opt_value"])
-            self.steps, self.iterations, self.best = int(st["steps"]), int(st["iterations"]), float(st["best"])
-            self.elapsed_before = float(st["wall_time_s"])
-            self.rng.bit_generator.state = st["rng"]
-            torch.set_rng_state(st["torch_rng"])
+            self._restore(resume, init)
         for g in self.opt_actor.param_groups:  # a resumed run takes the step sizes given now
             g["lr"] = cfg.lr
         for g in self.opt_value.param_groups:
@@ -258,7 +254,21 @@ class PPORun:
         self.next_eval = (self.steps // cfg.eval_every + 1) * cfg.eval_every
         self.history: list[dict[str, float]] = []
 
-    def reset(self, idx: Any) -> None:
+    def _restore(self, resume: str | Path, init: dict[str, Any]) -> None:
+        """Continue the run saved in ``resume`` (read as ``init``): the value network, the
+        optimisers, the counters and the random state."""
+        if "ppo" not in init:
+            raise CheckpointError(f"{resume}: not a PPO trainer state (resume from a PPO run's last.pt)")
+        st = init["ppo"]
+        self.value.load_state_dict(st["value"])
+        self.opt_actor.load_state_dict(st["opt_actor"])
+        self.opt_value.load_state_dict(st["opt_value"])
+        self.steps, self.iterations, self.best = int(st["steps"]), int(st["iterations"]), float(st["best"])
+        self.elapsed_before = float(st["wall_time_s"])
+        self.rng.bit_generator.state = st["rng"]
+        torch.set_rng_state(st["torch_rng"])
+
+    def reset(self, idx: Iterable[int]) -> None:
         """New episodes in environments ``idx``: on a demonstration path (a share
         ``start_share`` of them, when there are demonstrations) or a fresh problem."""
         cfg = self.cfg
@@ -278,7 +288,9 @@ class PPORun:
             problems.append(Problem(prob.scene, path[len(path) - 1 - k].copy(), prob.goal, prob.tag))
         self.core.reset_envs(idx, self.rng, problems)
 
-    def greedy(self, reward: np.ndarray, term: np.ndarray, trunc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def greedy(
+        self, reward: np.ndarray, term: np.ndarray, trunc: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The planner's goal test after a step: where the episode goes on and the straight
         edge to the goal is free, it ends solved, with the arrival reward."""
         from ..planners.edges import edge_free
@@ -299,7 +311,11 @@ class PPORun:
         cfg = self.cfg
         longest = max((len(p) - 1 for _, p in self.demo_paths), default=0)
         self.frontier = self.frontier[-cfg.start_min_episodes :]
-        if len(self.frontier) == cfg.start_min_episodes and np.mean(self.frontier) >= cfg.start_advance and self.back < longest:
+        if (
+            len(self.frontier) == cfg.start_min_episodes
+            and np.mean(self.frontier) >= cfg.start_advance
+            and self.back < longest
+        ):
             self.back = min(self.back + cfg.start_back_step, longest)
             self.frontier = []
 
@@ -343,7 +359,9 @@ class PPORun:
                 nxt = core.observe(self.rng)["observation"]
                 if trunc.any():  # a time limit: what follows is worth the final state's value
                     idx = np.flatnonzero(trunc)
-                    truncated_at.append((t, idx, obs_input(robot, nxt[idx]), goal_input(robot, core.q[idx], core.goal[idx])))
+                    truncated_at.append(
+                        (t, idx, obs_input(robot, nxt[idx]), goal_input(robot, core.q[idx], core.goal[idx]))
+                    )
                 if done.any():
                     ended = np.flatnonzero(done)
                     demo = [i for i in ended if self.from_demo[i]]
@@ -354,7 +372,11 @@ class PPORun:
                     fresh = core.observe(self.rng)["observation"]
                     nxt = np.where(done.reshape((-1,) + (1,) * len(self.obs_shape)), fresh, nxt)
                 self.obs = nxt
-            last_v = self.value(self.tensor(obs_input(robot, self.obs)), self.tensor(goal_input(robot, core.q, core.goal))).cpu().numpy()
+            last_v = (
+                self.value(self.tensor(obs_input(robot, self.obs)), self.tensor(goal_input(robot, core.q, core.goal)))
+                .cpu()
+                .numpy()
+            )
             next_b[:-1] = val_b[1:]
             next_b[-1] = last_v
             next_b *= 1.0 - done_b  # successes and time limits: nothing (time limits get their value below)
@@ -375,7 +397,13 @@ class PPORun:
         obs, goal, u = self.tensor(batch.obs), self.tensor(batch.goal), self.tensor(batch.u)
         old_logp, adv_t, ret = self.tensor(batch.logp), self.tensor(adv), self.tensor(batch.ret)
         train_actor = self.iterations >= cfg.value_warmup
-        stats: dict[str, list[float]] = {"value_loss": [], "policy_loss": [], "approx_kl": [], "clip_frac": [], "entropy": []}
+        stats: dict[str, list[float]] = {
+            "value_loss": [],
+            "policy_loss": [],
+            "approx_kl": [],
+            "clip_frac": [],
+            "entropy": [],
+        }
         actor_on = train_actor
         for _ in range(cfg.epochs):
             perm = torch.as_tensor(self.rng.permutation(n), device=self.device)
@@ -431,7 +459,9 @@ class PPORun:
         actor.eval()
         row: dict[str, float] = {}
         greedy = self.cfg.greedy_goal
-        res = rollout_batch(act, robot, env, self.val_problems, self.scenario.horizon, seed=self.cfg.seed, greedy_goal=greedy)
+        res = rollout_batch(
+            act, robot, env, self.val_problems, self.scenario.horizon, seed=self.cfg.seed, greedy_goal=greedy
+        )
         row["val_success"] = float(np.mean([r.success for r in res]))
         solved = [r.nodes for r in res if r.success]
         row["val_steps"] = float(np.mean(solved)) if solved else 0.0
@@ -454,7 +484,13 @@ class PPORun:
 
     # ------------------------------------------------------------------ checkpoints
     def payload(self) -> dict[str, Any]:
-        return {**self.meta, "actor": self.actor.state_dict(), "horizon": self.scenario.horizon, "ppo_config": to_dict(self.cfg), "env_steps": self.steps}
+        return {
+            **self.meta,
+            "actor": self.actor.state_dict(),
+            "horizon": self.scenario.horizon,
+            "ppo_config": to_dict(self.cfg),
+            "env_steps": self.steps,
+        }
 
     def save(self, row: dict[str, float] | None) -> None:
         payload = self.payload()
@@ -476,7 +512,10 @@ class PPORun:
             if row[key] > self.best:
                 self.best = row[key]
                 state["best"] = self.best
-                self.folder.save("best.pt", {**payload, "val_success": row["val_success"], **{k: row[k] for k in row if k.startswith("val_")}})
+                self.folder.save(
+                    "best.pt",
+                    {**payload, "val_success": row["val_success"], **{k: row[k] for k in row if k.startswith("val_")}},
+                )
         self.folder.save("last.pt", {**payload, "ppo": state})
 
     def next_rollout(self) -> int:
@@ -509,7 +548,9 @@ class PPORun:
         return post
 
 
-def train_ppo(cfg: PPOConfig, run_dir: str | Path, resume: str | Path | None = None, progress: bool = True) -> dict[str, Any]:
+def train_ppo(
+    cfg: PPOConfig, run_dir: str | Path, resume: str | Path | None = None, progress: bool = True
+) -> dict[str, Any]:
     """Fine-tune ``cfg.init_actor`` (or continue ``resume``'s run) with PPO; checkpoints
     ``best.pt`` and ``last.pt``, ``metrics.csv`` and TensorBoard logs in ``run_dir``. Ctrl-C
     stops after the current iteration and saves the trainer state. Returns a summary."""
@@ -518,7 +559,9 @@ def train_ppo(cfg: PPOConfig, run_dir: str | Path, resume: str | Path | None = N
     folder = RunDir(run_dir, "pointplan ppo")
     run = PPORun(cfg, folder, resume)
     if run.steps >= cfg.total_steps:
-        raise ValueError(f"{resume}: the run has done {run.steps} steps already; set total_steps above that to continue it")
+        raise ValueError(
+            f"{resume}: the run has done {run.steps} steps already; set total_steps above that to continue it"
+        )
     if resume is not None:
         folder.metrics.drop_after(run.steps)
     bar = None
@@ -553,4 +596,10 @@ def train_ppo(cfg: PPOConfig, run_dir: str | Path, resume: str | Path | None = N
     if ctrl_c.requested:
         folder.interrupted(f"at step {run.steps}", lambda: run.save(None), best_note(best))
     folder.close()
-    return {"run_dir": str(run.run_dir), "best_success": best, "steps": run.steps, "wall_time_s": run.wall, "interrupted": ctrl_c.requested}
+    return {
+        "run_dir": str(run.run_dir),
+        "best_success": best,
+        "steps": run.steps,
+        "wall_time_s": run.wall,
+        "interrupted": ctrl_c.requested,
+    }

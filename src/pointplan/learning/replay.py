@@ -40,7 +40,15 @@ class EpisodeStaging:
     """The running episodes of ``E`` environments: one transition per environment at a
     time; each episode is handed out whole when it ends."""
 
-    def __init__(self, num_envs: int, horizon: int, obs_shape: tuple[int, ...], config_dim: int, action_dim: int, obs_dtype: type = np.float32) -> None:
+    def __init__(
+        self,
+        num_envs: int,
+        horizon: int,
+        obs_shape: tuple[int, ...],
+        config_dim: int,
+        action_dim: int,
+        obs_dtype: type = np.float32,
+    ) -> None:
         e, h = int(num_envs), int(horizon)
         self.arrays: dict[str, np.ndarray] = {
             "obs": np.zeros((e, h) + tuple(obs_shape), obs_dtype),
@@ -71,7 +79,9 @@ class EpisodeReplay:
     bytes: 2.0 GB for 1e6 transitions of 64 points x 4 features).
     """
 
-    def __init__(self, capacity: int, obs_shape: tuple[int, ...], config_dim: int, action_dim: int, obs_dtype: type = np.float32) -> None:
+    def __init__(
+        self, capacity: int, obs_shape: tuple[int, ...], config_dim: int, action_dim: int, obs_dtype: type = np.float32
+    ) -> None:
         self.capacity = int(capacity)
         c = self.capacity
         self.obs: np.ndarray = np.zeros((c,) + tuple(obs_shape), obs_dtype)
@@ -92,7 +102,9 @@ class EpisodeReplay:
 
     def track(self, num_envs: int, horizon: int) -> None:
         """Stage the running episodes of ``num_envs`` environments of at most ``horizon`` steps."""
-        self._staging = EpisodeStaging(num_envs, horizon, self.obs.shape[1:], self.q.shape[1], self.action.shape[1], self.obs.dtype.type)
+        self._staging = EpisodeStaging(
+            num_envs, horizon, self.obs.shape[1:], self.q.shape[1], self.action.shape[1], self.obs.dtype.type
+        )
 
     def add_steps(self, t: np.ndarray, done: np.ndarray, **transition: np.ndarray) -> None:
         """One transition per tracked environment, at step ``t[i]`` of its episode (the

@@ -84,7 +84,9 @@ class MetricsLog:
     The step of a row is its ``step_key`` value (default: the row's first key). Values that
     are ``None`` or not finite are left out (an empty cell, no scalar)."""
 
-    def __init__(self, run_dir: str | Path, step_key: str | None = None, name: str = "metrics.csv", tb_dir: str = "tb") -> None:
+    def __init__(
+        self, run_dir: str | Path, step_key: str | None = None, name: str = "metrics.csv", tb_dir: str = "tb"
+    ) -> None:
         self.run_dir = Path(run_dir)
         self.path = self.run_dir / name
         self.step_key = step_key
@@ -242,7 +244,11 @@ class RunDir:
             if main:
                 signal.signal(signal.SIGINT, old)
         extra = f" ({note})" if note else ""
-        print(f"interrupted {where}: trainer state saved to {self.last}{extra}; continue with: {self.resume_command()}", file=sys.stderr, flush=True)
+        print(
+            f"interrupted {where}: trainer state saved to {self.last}{extra}; continue with: {self.resume_command()}",
+            file=sys.stderr,
+            flush=True,
+        )
 
     def close(self) -> None:
         self.metrics.close()
@@ -297,4 +303,15 @@ def best_note(best: float | None, what: str = "validation success") -> str:
     return f"best {what} {best:.3f}" if best is not None else "no validation yet"
 
 
-__all__ = ["LAST", "CtrlC", "MetricsLog", "RunDir", "RunDirError", "atomic_write", "best_note", "best_or_none", "check_run_dir", "load_trainer_state"]
+__all__ = [
+    "LAST",
+    "CtrlC",
+    "MetricsLog",
+    "RunDir",
+    "RunDirError",
+    "atomic_write",
+    "best_note",
+    "best_or_none",
+    "check_run_dir",
+    "load_trainer_state",
+]

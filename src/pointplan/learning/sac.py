@@ -81,7 +81,15 @@ def batch_rewards(robot: Robot, env: EnvConfig, b: Batch) -> tuple[np.ndarray, n
 class SAC:
     """Actor, twin critic, target critic and temperature, with their optimisers."""
 
-    def __init__(self, robot: Robot, env: EnvConfig, obs_shape: tuple[int, ...], net: NetConfig, cfg: SACConfig, device: str = "cpu") -> None:
+    def __init__(
+        self,
+        robot: Robot,
+        env: EnvConfig,
+        obs_shape: tuple[int, ...],
+        net: NetConfig,
+        cfg: SACConfig,
+        device: str = "cpu",
+    ) -> None:
         self.robot, self.env, self.cfg, self.net_cfg = robot, env, cfg, net
         self.device = torch.device(device)
         goal_dim = robot.twist_dim
@@ -92,7 +100,9 @@ class SAC:
         actor_params = self.actor.head.parameters() if self.actor.detach_encoder else self.actor.parameters()
         self.actor_opt = torch.optim.Adam(actor_params, lr=cfg.lr)
         self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr)
-        self.log_alpha = torch.tensor(np.log(cfg.init_alpha), dtype=torch.float32, device=self.device, requires_grad=True)
+        self.log_alpha = torch.tensor(
+            np.log(cfg.init_alpha), dtype=torch.float32, device=self.device, requires_grad=True
+        )
         self.alpha_opt = torch.optim.Adam([self.log_alpha], lr=cfg.lr)
         self.target_entropy = cfg.target_entropy_scale * robot.twist_dim
         self.updates = 0
@@ -125,7 +135,9 @@ class SAC:
         return self.tensor(obs_input(self.robot, obs))
 
     @torch.no_grad()
-    def act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray, deterministic: bool = False, averaged: bool = False) -> np.ndarray:
+    def act(
+        self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray, deterministic: bool = False, averaged: bool = False
+    ) -> np.ndarray:
         """Actions for collection (sampled) or evaluation (``deterministic``); ``averaged``
         uses the running average of the actor when one is kept."""
         o, g = self.observations(obs), self.goal_vectors(q, goal)

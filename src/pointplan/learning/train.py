@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -25,12 +25,15 @@ from ..models.actor_critic import NetConfig
 from ..models.checkpoint import CheckpointError, load_checkpoint, to_dict
 from ..models.encoders import EncoderConfig
 from ..parallel import RolloutSource, backend, wants_workers
-from ..scenes.scenarios import make_scenario
+from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Problem
 from .curriculum import EpisodeSource, FailurePool
 from .replay import Batch, EpisodeReplay
 from .rundir import MetricsLog, RunDir, best_note, best_or_none
 from .sac import SAC, DemoBatch, SACConfig
+
+if TYPE_CHECKING:
+    from ..planners.base import PlanResult
 
 #: the metrics log of a run folder (``metrics.csv`` and TensorBoard)
 _Logger = MetricsLog
@@ -63,7 +66,11 @@ class TrainConfig:
     seed: int = 0
     #: ``cpu`` or ``cuda``
     device: str = "cpu"
-    net: NetConfig = field(default_factory=lambda: NetConfig(EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True))
+    net: NetConfig = field(
+        default_factory=lambda: NetConfig(
+            EncoderConfig(width=64), head_width=64, critic_action="pooled", shared_encoder=True
+        )
+    )
     sac: SACConfig = field(default_factory=SACConfig)
     #: a checkpoint whose actor initialises this run's actor (e.g. behavioural cloning)
     init_actor: str | None = None
@@ -103,7 +110,9 @@ class TrainResult:
     interrupted: bool = False
 
 
-def _checkpoint_payload(cfg: TrainConfig, agent: SAC, obs_shape: tuple[int, ...], robot_name: str, extra: dict[str, Any]) -> dict[str, Any]:
+def _checkpoint_payload(
+    cfg: TrainConfig, agent: SAC, obs_shape: tuple[int, ...], robot_name: str, extra: dict[str, Any]
+) -> dict[str, Any]:
     return {
         "env": cfg.env,
         "robot": robot_name,
@@ -158,7 +167,7 @@ class _Run:
 
     cfg: TrainConfig
     folder: RunDir
-    scenario: Any
+    scenario: Scenario
     core: BatchedCore
     env_cfg: EnvConfig
     obs_shape: tuple[int, ...]
@@ -200,7 +209,7 @@ class _Run:
         return self.steps < self.cfg.warmup_steps and self.cfg.init_actor is None
 
 
-def _start(cfg: TrainConfig, folder: RunDir, resume: str | Path | None, remote: Any) -> _Run:
+def _start(cfg: TrainConfig, folder: RunDir, resume: str | Path | None, remote: RolloutSource | None) -> _Run:
     """Build the environments, the agent and the buffer; restore ``resume``'s trainer state."""
     scenario = make_scenario(cfg.env, robot=cfg.robot)
     env_cfg = EnvConfig(observation=cfg.observation, n_points=cfg.n_points, split="train", action_cost=cfg.action_cost)
@@ -215,9 +224,13 @@ def _start(cfg: TrainConfig, folder: RunDir, resume: str | Path | None, remote: 
     if resume is not None:
         _resume(run, resume)
         if run.steps >= cfg.total_steps:
-            raise ValueError(f"{resume}: the run has done {run.steps} steps already; set total_steps above that to continue it")
+            raise ValueError(
+                f"{resume}: the run has done {run.steps} steps already; set total_steps above that to continue it"
+            )
     robot = scenario.robot
-    run.buffer = EpisodeReplay(int(min(cfg.sac.buffer_size, max(cfg.total_steps, 10_000))), obs_shape, robot.config_dim, robot.twist_dim)
+    run.buffer = EpisodeReplay(
+        int(min(cfg.sac.buffer_size, max(cfg.total_steps, 10_000))), obs_shape, robot.config_dim, robot.twist_dim
+    )
     run.buffer.track(cfg.num_envs, core.horizon)
     run.val_problems = scenario.problems("val", cfg.eval_episodes, seed=cfg.seed)
     run.logger = folder.metrics
@@ -247,9 +260,13 @@ def _load_demos(run: _Run) -> None:
 
     cfg, robot = run.cfg, run.scenario.robot
     if not cfg.demos:
-        raise ValueError("--bc-weight and --demo-share need demonstrations: give --demos FILE (written by `pointplan bc --demos FILE`)")
+        raise ValueError(
+            "--bc-weight and --demo-share need demonstrations: give --demos FILE (written by `pointplan bc --demos FILE`)"
+        )
     if not Path(cfg.demos).exists():
-        raise FileNotFoundError(f"--demos {cfg.demos}: no such file (write one with `pointplan bc --demos {cfg.demos}`)")
+        raise FileNotFoundError(
+            f"--demos {cfg.demos}: no such file (write one with `pointplan bc --demos {cfg.demos}`)"
+        )
     run.demos = load_demos(cfg.demos, run.scenario)
     agent = run.agent
     run.demo_goal = agent.tensor(goal_input(robot, run.demos.q, run.demos.goal))
@@ -277,7 +294,9 @@ def _sample(run: _Run) -> Batch:
     k = int(round(cfg.demo_share * n))
     own = run.buffer.sample(n - k, run.rng, cfg.sac.her_ratio)
     demo = run.demo_buffer.sample(k, run.rng, cfg.sac.her_ratio)
-    return Batch(**{f.name: np.concatenate([getattr(own, f.name), getattr(demo, f.name)]) for f in dataclasses.fields(Batch)})
+    return Batch(
+        **{f.name: np.concatenate([getattr(own, f.name), getattr(demo, f.name)]) for f in dataclasses.fields(Batch)}
+    )
 
 
 def _demo_batch(run: _Run) -> DemoBatch | None:
@@ -302,7 +321,9 @@ def _resume(run: _Run, path: str | Path) -> None:
     cfg, agent = run.cfg, run.agent
     state = load_checkpoint(path, cfg.device)
     if "trainer" not in state:
-        raise CheckpointError(f"{path}: holds a policy but no trainer state (best.pt and bc.pt do not); resume from the run's last.pt")
+        raise CheckpointError(
+            f"{path}: holds a policy but no trainer state (best.pt and bc.pt do not); resume from the run's last.pt"
+        )
     trainer = state["trainer"]
     agent.load_state_dict(trainer["agent"])
     run.steps = int(trainer["steps"])
@@ -331,7 +352,16 @@ def _collect(run: _Run) -> int:
     next_obs = core.observe(rng)["observation"]
     done = term | trunc
     run.buffer.add_steps(
-        t, done, obs=run.obs, next_obs=next_obs, q=q, q_next=core.q, goal=goal, action=actions, action_norm=info["action_norm"], collided=info["collided"]
+        t,
+        done,
+        obs=run.obs,
+        next_obs=next_obs,
+        q=q,
+        q_next=core.q,
+        goal=goal,
+        action=actions,
+        action_norm=info["action_norm"],
+        collided=info["collided"],
     )
     run.steps += e
     if done.any():
@@ -369,13 +399,18 @@ def _learn(run: _Run, collected: int) -> None:
             run.credit -= 1.0
 
 
-def _rollouts(run: _Run, problems: list[Problem], averaged: bool, seed: int) -> list[Any]:
+def _rollouts(run: _Run, problems: list[Problem], averaged: bool, seed: int) -> list[PlanResult]:
     """The deterministic policy on ``problems``."""
     from ..planners.rollout import rollout_batch
 
     agent = run.agent
     return rollout_batch(
-        lambda o, q, g: agent.act(o, q, g, deterministic=True, averaged=averaged), run.scenario.robot, run.env_cfg, problems, run.scenario.horizon, seed=seed
+        lambda o, q, g: agent.act(o, q, g, deterministic=True, averaged=averaged),
+        run.scenario.robot,
+        run.env_cfg,
+        problems,
+        run.scenario.horizon,
+        seed=seed,
     )
 
 
@@ -406,7 +441,9 @@ def _validate(run: _Run) -> tuple[dict[str, float], float]:
     res = _rollouts(run, run.val_problems, averaged=True, seed=run.cfg.seed)
     raw: dict[str, float] = {}
     if agent.actor_avg is not None:  # the current actor too, for comparison
-        raw["val_success_current"] = float(np.mean([r.success for r in _rollouts(run, run.val_problems, averaged=False, seed=run.cfg.seed)]))
+        raw["val_success_current"] = float(
+            np.mean([r.success for r in _rollouts(run, run.val_problems, averaged=False, seed=run.cfg.seed)])
+        )
     if run.pool is not None:
         raw.update(_mine_failures(run))
     agent.actor.train()
@@ -459,7 +496,9 @@ def _evaluate(run: _Run, on_eval: Callable[[dict[str, float]], None] | None, bar
         on_eval(row)
     _save(run, row, nodes_all)
     if bar is not None:
-        bar.write(f"step {run.steps}: val success {row['val_success']:.3f} (best {run.best:.3f}), {row['wall_time_s']:.0f} s")
+        bar.write(
+            f"step {run.steps}: val success {row['val_success']:.3f} (best {run.best:.3f}), {row['wall_time_s']:.0f} s"
+        )
     return row["val_success"]
 
 
@@ -489,7 +528,7 @@ def _train(
     progress: bool,
     resume: str | Path | None,
     on_eval: Callable[[dict[str, float]], None] | None,
-    remote: Any,
+    remote: RolloutSource | None,
 ) -> TrainResult:
     run = _start(cfg, folder, resume, remote)
     bar = None
@@ -513,9 +552,18 @@ def _train(
     if bar is not None:
         bar.close()
     if ctrl_c.requested or stop_now:  # (with Ray workers the last validation saved the state)
-        folder.interrupted(f"at step {run.steps}", (lambda: _save_last(run)) if ctrl_c.requested else (lambda: None), best_note(best_or_none(run.best)))
+        folder.interrupted(
+            f"at step {run.steps}",
+            (lambda: _save_last(run)) if ctrl_c.requested else (lambda: None),
+            best_note(best_or_none(run.best)),
+        )
     folder.close()
     interrupted = ctrl_c.requested or stop_now
     return TrainResult(
-        run_dir=run.run_dir, best_success=best_or_none(run.best), steps=run.steps, wall_time_s=run.wall, history=run.history, interrupted=interrupted
+        run_dir=run.run_dir,
+        best_success=best_or_none(run.best),
+        steps=run.steps,
+        wall_time_s=run.wall,
+        history=run.history,
+        interrupted=interrupted,
     )

@@ -48,15 +48,24 @@ class NetConfig:
 class Actor(nn.Module):
     """Tanh-Gaussian policy: ``forward(obs, goal) -> (mean, log_std)`` before the tanh."""
 
-    def __init__(self, obs_shape: tuple[int, ...], goal_dim: int, action_dim: int, cfg: NetConfig, encoder: nn.Module | None = None) -> None:
+    def __init__(
+        self,
+        obs_shape: tuple[int, ...],
+        goal_dim: int,
+        action_dim: int,
+        cfg: NetConfig,
+        encoder: nn.Module | None = None,
+    ) -> None:
         super().__init__()
         self.encoder = encoder if encoder is not None else make_encoder(cfg.encoder, obs_shape)
         self.detach_encoder = encoder is not None
-        feat = int(getattr(self.encoder, "features_dim"))
+        feat = int(self.encoder.features_dim)  # type: ignore[arg-type]
         self.head = mlp([feat + goal_dim] + [cfg.head_width] * cfg.head_layers + [2 * action_dim])
         self.action_dim = action_dim
 
-    def forward(self, obs: torch.Tensor, goal: torch.Tensor, features: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(
+        self, obs: torch.Tensor, goal: torch.Tensor, features: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """Mean and log-std; pass ``features`` (the pooled encoding) to skip the encoder."""
         h = self.encoder(obs) if features is None else features
         if self.detach_encoder:
@@ -65,7 +74,9 @@ class Actor(nn.Module):
         mean, log_std = out.split(self.action_dim, -1)
         return mean, log_std.clamp(LOG_STD_MIN, LOG_STD_MAX)
 
-    def sample(self, obs: torch.Tensor, goal: torch.Tensor, features: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    def sample(
+        self, obs: torch.Tensor, goal: torch.Tensor, features: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """A reparameterised action in (-1, 1) and its log-probability ``(B,)``."""
         mean, log_std = self(obs, goal, features)
         std = log_std.exp()
@@ -84,16 +95,25 @@ class Actor(nn.Module):
 class QNetwork(nn.Module):
     """One Q-function ``Q(obs, goal, action) -> (B,)``."""
 
-    def __init__(self, obs_shape: tuple[int, ...], goal_dim: int, action_dim: int, cfg: NetConfig, encoder: nn.Module | None = None) -> None:
+    def __init__(
+        self,
+        obs_shape: tuple[int, ...],
+        goal_dim: int,
+        action_dim: int,
+        cfg: NetConfig,
+        encoder: nn.Module | None = None,
+    ) -> None:
         super().__init__()
         self.on_points = cfg.critic_action == "points"
         extra = action_dim if self.on_points else 0
         self.encoder = encoder if encoder is not None else make_encoder(cfg.encoder, obs_shape, extra=extra)
-        feat = int(getattr(self.encoder, "features_dim"))
+        feat = int(self.encoder.features_dim)  # type: ignore[arg-type]
         head_in = feat + goal_dim + (0 if self.on_points else action_dim)
         self.head = mlp([head_in] + [cfg.head_width] * cfg.head_layers + [1])
 
-    def forward(self, obs: torch.Tensor, goal: torch.Tensor, action: torch.Tensor, features: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(
+        self, obs: torch.Tensor, goal: torch.Tensor, action: torch.Tensor, features: torch.Tensor | None = None
+    ) -> torch.Tensor:
         if self.on_points:
             h = self.encoder(obs, action)
             x = torch.cat([h, goal], -1)
@@ -108,20 +128,31 @@ class TwinCritic(nn.Module):
 
     shared: nn.Module | None
 
-    def __init__(self, obs_shape: tuple[int, ...], goal_dim: int, action_dim: int, cfg: NetConfig, encoder: nn.Module | None = None) -> None:
+    def __init__(
+        self,
+        obs_shape: tuple[int, ...],
+        goal_dim: int,
+        action_dim: int,
+        cfg: NetConfig,
+        encoder: nn.Module | None = None,
+    ) -> None:
         super().__init__()
         self.shared = encoder
         self.q1 = QNetwork(obs_shape, goal_dim, action_dim, cfg, encoder)
         self.q2 = QNetwork(obs_shape, goal_dim, action_dim, cfg, encoder)
 
-    def forward(self, obs: torch.Tensor, goal: torch.Tensor, action: torch.Tensor, features: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(
+        self, obs: torch.Tensor, goal: torch.Tensor, action: torch.Tensor, features: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """Both Q-values; with a shared encoder, ``features`` skips it."""
         if self.shared is not None and features is None:
             features = self.shared(obs)
         return self.q1(obs, goal, action, features), self.q2(obs, goal, action, features)
 
 
-def build_networks(obs_shape: tuple[int, ...], goal_dim: int, action_dim: int, cfg: NetConfig) -> tuple[Actor, TwinCritic]:
+def build_networks(
+    obs_shape: tuple[int, ...], goal_dim: int, action_dim: int, cfg: NetConfig
+) -> tuple[Actor, TwinCritic]:
     """Actor and twin critic; with ``shared_encoder`` they share one encoder module (owned
     by the critic)."""
     if cfg.shared_encoder:

@@ -125,7 +125,9 @@ def _first_line(e: BaseException) -> str:
 def _read_data_only(path: Path, device: str) -> Any:
     """``torch.load(weights_only=True)`` with one-line ``CheckpointError``\\ s."""
     if not zipfile.is_zipfile(path):  # torch.save writes zip archives; nothing else is tried
-        raise CheckpointError(f"{path}: not a pointplan checkpoint (not a PyTorch zip archive: another kind of file, or truncated)")
+        raise CheckpointError(
+            f"{path}: not a pointplan checkpoint (not a PyTorch zip archive: another kind of file, or truncated)"
+        )
     try:
         return torch.load(path, map_location=device, weights_only=True)
     except pickle.UnpicklingError as e:
@@ -133,7 +135,9 @@ def _read_data_only(path: Path, device: str) -> Any:
             raise CheckpointError(f"{path}: not a readable checkpoint ({_first_line(e)})") from None
         found = re.search(r"GLOBAL ([\w.]+)", str(e))
         what = f" ({found.group(1)})" if found else ""
-        raise CheckpointError(f"{path}: refused: it holds pickled Python objects{what}, which could run code when loaded; {convert_hint(path)}") from None
+        raise CheckpointError(
+            f"{path}: refused: it holds pickled Python objects{what}, which could run code when loaded; {convert_hint(path)}"
+        ) from None
     except Exception as e:  # torch raises many kinds on a corrupt file
         raise CheckpointError(f"{path}: not a readable checkpoint ({_first_line(e)})") from None
 
@@ -150,18 +154,26 @@ def load_checkpoint(path: str | Path, device: str = "cpu") -> dict[str, Any]:
     if type(version) is not int or version < min(READABLE_VERSIONS):
         raise CheckpointError(f"{path}: unknown checkpoint version {version!r}")
     if version > VERSION:
-        raise CheckpointError(f"{path}: checkpoint version {version} is newer than this pointplan understands ({VERSION})")
+        raise CheckpointError(
+            f"{path}: checkpoint version {version} is newer than this pointplan understands ({VERSION})"
+        )
     bad = find_non_plain(data)
     if bad is not None:  # possible only if someone allow-listed more types for torch.load
         raise CheckpointError(f"{path}: refused: {bad} is not plain data; {convert_hint(path)}")
     return data
 
 
-def check_compatible(data: dict[str, Any], robot: str, observation: str, obs_shape: tuple[int, ...], where: str = "checkpoint") -> None:
+def check_compatible(
+    data: dict[str, Any], robot: str, observation: str, obs_shape: tuple[int, ...], where: str = "checkpoint"
+) -> None:
     """Refuse a checkpoint trained for another robot or observation."""
     if data["robot"] != robot:
         raise CheckpointError(f"{where} was trained for robot {data['robot']!r}, not {robot!r}")
     if data["observation"] != observation:
-        raise CheckpointError(f"{where} was trained on {data['observation']!r} observations, this env gives {observation!r}")
+        raise CheckpointError(
+            f"{where} was trained on {data['observation']!r} observations, this env gives {observation!r}"
+        )
     if tuple(data["obs_shape"]) != tuple(obs_shape):
-        raise CheckpointError(f"{where} expects observations of shape {tuple(data['obs_shape'])}, this env gives {tuple(obs_shape)}")
+        raise CheckpointError(
+            f"{where} expects observations of shape {tuple(data['obs_shape'])}, this env gives {tuple(obs_shape)}"
+        )

@@ -23,7 +23,9 @@ _SCALARS = (str, int, float, bool, type(None))
 
 def _fail(where: str, obj: Any) -> CheckpointError:
     t = type(obj)
-    return CheckpointError(f"cannot convert {where or '/'}: a {t.__module__}.{t.__qualname__} has no plain-data form ({PLAIN_TYPES})")
+    return CheckpointError(
+        f"cannot convert {where or '/'}: a {t.__module__}.{t.__qualname__} has no plain-data form ({PLAIN_TYPES})"
+    )
 
 
 def _array(arr: np.ndarray, where: str, notes: list[str]) -> torch.Tensor:
@@ -91,7 +93,9 @@ def convert_checkpoint(src: str | Path, dst: str | Path, *, trust_source: bool =
     ``trust_source=True`` is required: convert only files from a source you trust.
     """
     if trust_source is not True:
-        raise CheckpointError("convert_checkpoint unpickles the file, which can run code: pass trust_source=True only for a file you trust")
+        raise CheckpointError(
+            "convert_checkpoint unpickles the file, which can run code: pass trust_source=True only for a file you trust"
+        )
     src = Path(src)
     if not src.is_file():
         raise CheckpointError(f"{src}: no such checkpoint")
@@ -104,7 +108,9 @@ def convert_checkpoint(src: str | Path, dst: str | Path, *, trust_source: bool =
         raise CheckpointError(f"{src}: not a pointplan checkpoint")
     version = data.get("version")
     if type(version) is int and version > VERSION:
-        raise CheckpointError(f"{src}: checkpoint version {version} is newer than this pointplan understands ({VERSION})")
+        raise CheckpointError(
+            f"{src}: checkpoint version {version} is newer than this pointplan understands ({VERSION})"
+        )
     notes: list[str] = []
     try:
         payload = to_plain({k: v for k, v in data.items() if k not in HEADER_KEYS}, "", notes)

@@ -65,7 +65,9 @@ class CVAEConfig:
 class ConditionalVAE(nn.Module):
     """``q(z | x, c)`` and ``p(x | z, c)`` as MLPs with ELU; ``x: (B, x_dim)``, ``c: (B, c_dim)``."""
 
-    def __init__(self, x_dim: int, c_dim: int, latent: int = 3, width: int = 128, layers: int = 2, input_scale: float = 1.0) -> None:
+    def __init__(
+        self, x_dim: int, c_dim: int, latent: int = 3, width: int = 128, layers: int = 2, input_scale: float = 1.0
+    ) -> None:
         super().__init__()
         self.x_dim, self.c_dim, self.latent = int(x_dim), int(c_dim), int(latent)
         self.input_scale = float(input_scale)
@@ -85,7 +87,9 @@ class ConditionalVAE(nn.Module):
         z = mu + torch.randn_like(mu) * (0.5 * logvar).exp()
         return self.decode(z, c), mu, logvar
 
-    def loss(self, x: torch.Tensor, c: torch.Tensor, kl_weight: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def loss(
+        self, x: torch.Tensor, c: torch.Tensor, kl_weight: float
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(loss, reconstruction, kl)``, each a batch mean; reconstruction is the squared
         error summed over coordinates, kl the KL divergence of ``q`` from ``N(0, I)``."""
         x_hat, mu, logvar = self(x, c)
@@ -122,12 +126,16 @@ class LearnedSamplerNet(nn.Module):
             raise ValueError("the start-goal frame is defined in 2D only")
         self.config, self.dim = config, int(dim)
         self.obstacles = PointNetEncoder(2 * dim, config.point_width, config.point_layers)
-        self.cvae = ConditionalVAE(dim, config.point_width + 2 * dim, config.latent, config.width, config.layers, config.input_scale)
+        self.cvae = ConditionalVAE(
+            dim, config.point_width + 2 * dim, config.latent, config.width, config.layers, config.input_scale
+        )
         scale = torch.ones(2 * dim)
         scale[:dim] = config.input_scale if config.frame == "world" else 1.0
         self.register_buffer("_point_scale", scale, persistent=False)
 
-    def _frame(self, start: torch.Tensor, goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    def _frame(
+        self, start: torch.Tensor, goal: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """Origin, half distance ``(B, 1)`` and the two unit axes of the start-goal frame."""
         mid = 0.5 * (start + goal)
         delta = 0.5 * (goal - start)
@@ -198,4 +206,13 @@ def pad_cloud(cloud: Array, n: int) -> Array:
     return cloud[np.arange(n) % len(cloud)]
 
 
-__all__ = ["POINT_SPACING", "CVAEConfig", "ConditionalVAE", "LearnedSamplerNet", "denormalise", "normalise", "pad_cloud", "scene_cloud"]
+__all__ = [
+    "POINT_SPACING",
+    "CVAEConfig",
+    "ConditionalVAE",
+    "LearnedSamplerNet",
+    "denormalise",
+    "normalise",
+    "pad_cloud",
+    "scene_cloud",
+]

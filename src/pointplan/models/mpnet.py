@@ -125,7 +125,9 @@ def _elu(x: np.ndarray) -> np.ndarray:
 
 
 def _wb(layer: nn.Linear) -> tuple[np.ndarray, np.ndarray]:
-    return layer.weight.detach().cpu().numpy().astype(np.float32).T.copy(), layer.bias.detach().cpu().numpy().astype(np.float32).copy()
+    return layer.weight.detach().cpu().numpy().astype(np.float32).T.copy(), layer.bias.detach().cpu().numpy().astype(
+        np.float32
+    ).copy()
 
 
 class NumpyMPNet:
@@ -205,11 +207,26 @@ class MPNet:
         meta = {k: v for k, v in data.items() if k != "model"}
         observation = str(data.get("observation", default_observation(robot)))
         n_points = int(data.get("n_points", N_POINTS_3D if observation == OBSERVATION_3D else 0))
-        return cls(model.eval(), robot, np.asarray(data["center"], np.float64), float(data["step"]), meta, observation, n_points)
+        return cls(
+            model.eval(),
+            robot,
+            np.asarray(data["center"], np.float64),
+            float(data["step"]),
+            meta,
+            observation,
+            n_points,
+        )
 
 
 def mpnet_payload(
-    model: MPNetModel, env: str, robot: Robot, center: np.ndarray, step: float, observation: str | None = None, n_points: int = 0, **extra: Any
+    model: MPNetModel,
+    env: str,
+    robot: Robot,
+    center: np.ndarray,
+    step: float,
+    observation: str | None = None,
+    n_points: int = 0,
+    **extra: Any,
 ) -> dict[str, Any]:
     """What an MPNet checkpoint holds (``extra``: plain data such as the training config)."""
     return {

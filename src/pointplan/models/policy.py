@@ -99,7 +99,11 @@ class NumpyPointNetActor:
     (:func:`obs_input`, :func:`goal_input`)."""
 
     def __init__(
-        self, inp: tuple[np.ndarray, np.ndarray], hidden: list[tuple[np.ndarray, np.ndarray]], head: list[tuple[np.ndarray, np.ndarray]], action_dim: int
+        self,
+        inp: tuple[np.ndarray, np.ndarray],
+        hidden: list[tuple[np.ndarray, np.ndarray]],
+        head: list[tuple[np.ndarray, np.ndarray]],
+        action_dim: int,
     ) -> None:
         self.inp = inp
         self.hidden = hidden
@@ -119,7 +123,11 @@ class NumpyPointNetActor:
             return None
         mods = list(actor.head)
         linears = [m for m in mods[0::2] if isinstance(m, nn.Linear)]
-        if len(linears) != len(mods[0::2]) or not all(isinstance(m, nn.ELU) and m.alpha == 1.0 for m in mods[1::2]) or len(mods) % 2 != 1:
+        if (
+            len(linears) != len(mods[0::2])
+            or not all(isinstance(m, nn.ELU) and m.alpha == 1.0 for m in mods[1::2])
+            or len(mods) % 2 != 1
+        ):
             return None
 
         def wb(layer: nn.Linear) -> tuple[np.ndarray, np.ndarray]:
@@ -208,7 +216,12 @@ def shipped_checkpoint(robot: str = "disc2d", observation: str | None = None, sc
 
     if scene is not None:
         for (r, o, sc), fname in SHIPPED_FOR_SCENE.items():
-            if r == robot and sc == scene and (observation is None or observation == o) and (files("pointplan") / "data" / fname).is_file():
+            if (
+                r == robot
+                and sc == scene
+                and (observation is None or observation == o)
+                and (files("pointplan") / "data" / fname).is_file()
+            ):
                 return Path(str(files("pointplan") / "data" / fname))
     if observation is None:  # the robot's usual observation, else any that ships for it
         have = [o for r, o in shipped_policies() if r == robot]

@@ -5,8 +5,10 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..robots.base import Robot
+from ..scenes.scene import Problem
 from .base import Observer, PointSetObserver
 from .image import OccupancyImage
 from .points import GlobalPoints, InteriorPoints, SurfaceNormals, SurfacePoints
@@ -34,7 +36,9 @@ def make_observer(name: str, robot: Robot, **kwargs: Any) -> Observer:
     return cls(robot, **kwargs)  # type: ignore[call-arg]
 
 
-def world_observation(problem: Any, robot: Robot, observation: str, n_points: int | None, q: Any, t: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def world_observation(
+    problem: Problem, robot: Robot, observation: str, n_points: int | None, q: ArrayLike, t: int, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
     """What the robot at ``q`` (time ``t``) observes, back in the world frame: the points
     and their normals (3D; padding rows dropped)."""
     observer = make_observer(observation, robot, **({"n_points": n_points} if n_points else {}))

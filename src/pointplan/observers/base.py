@@ -153,7 +153,9 @@ class PointSetObserver(Observer):
         (:meth:`observe_one` takes them as ``u``)."""
         return max(len(self._pts[0]), 1) + self.n_points
 
-    def observe_one(self, q: Array, rng: np.random.Generator | None = None, u: Array | None = None) -> NDArray[np.float32]:
+    def observe_one(
+        self, q: Array, rng: np.random.Generator | None = None, u: Array | None = None
+    ) -> NDArray[np.float32]:
         """``observe(q[None], rng)[0]`` for an observer bound to one static scene, without
         the batch machinery (a planner's batch-1 rollout calls this every step): the same
         random draws, the same values. ``u`` may pass the ``draws_one()`` uniform numbers

@@ -114,7 +114,9 @@ class PerturbedPoints(PointSetObserver):
         self.with_normals = base.with_normals
         self.noise = float(noise)
         self.drop = float(drop)
-        self.viewpoint = viewpoint if viewpoint is None or isinstance(viewpoint, str) else np.asarray(viewpoint, np.float64)
+        self.viewpoint = (
+            viewpoint if viewpoint is None or isinstance(viewpoint, str) else np.asarray(viewpoint, np.float64)
+        )
         self.subset = subset
         self.seed = int(seed)
         self._noise_rng = np.random.default_rng(self.seed)
@@ -132,7 +134,9 @@ class PerturbedPoints(PointSetObserver):
         p, n = self.base._pts[i], self.base._nrm[i]
         keep = np.ones(len(p), bool)
         if self.drop > 0.0:
-            gone = np.random.default_rng(self._scene_seed(scene, 1)).permutation(len(p))[: int(round(self.drop * len(p)))]
+            gone = np.random.default_rng(self._scene_seed(scene, 1)).permutation(len(p))[
+                : int(round(self.drop * len(p)))
+            ]
             keep[gone] = False
         if self.viewpoint is not None and not isinstance(self.viewpoint, str):
             keep &= visible_from(scene, p, self.viewpoint)
@@ -153,7 +157,9 @@ class PerturbedPoints(PointSetObserver):
         self._pts[0], self._nrm[0] = pts[keep], self._nrm[0][keep]
         self._stacked = None
 
-    def observe_one(self, q: Array, rng: np.random.Generator | None = None, u: Array | None = None) -> NDArray[np.float32]:
+    def observe_one(
+        self, q: Array, rng: np.random.Generator | None = None, u: Array | None = None
+    ) -> NDArray[np.float32]:
         if self._pending_start:
             self._see_from_start(q)
         if self.subset == "fps" and len(self._pts[0]) > self.n_points:
@@ -162,7 +168,9 @@ class PerturbedPoints(PointSetObserver):
                 assert rng is not None
                 u = rng.random(len(pts) + self.n_points)
             idx = farthest_point_subset(pts, self.n_points, int(np.argmin(u[: len(pts)])))
-            pb, nb = self.robot.to_body_frame(np.asarray(q, np.float64)[None], pts[idx][None], nrm[idx][None] if self.with_normals else None)
+            pb, nb = self.robot.to_body_frame(
+                np.asarray(q, np.float64)[None], pts[idx][None], nrm[idx][None] if self.with_normals else None
+            )
             obs = np.concatenate([pb[0], nb[0]], -1) if nb is not None else pb[0]
             obs = obs.astype(np.float32)
         else:
@@ -174,7 +182,9 @@ class PerturbedPoints(PointSetObserver):
 
     def select(self, rng: np.random.Generator) -> tuple[Array, Array]:
         if self._pending_start or self.subset != "random":
-            raise NotImplementedError("viewpoint='start' and subset='fps' work with PolicyPlanner.plan (observe_one) only")
+            raise NotImplementedError(
+                "viewpoint='start' and subset='fps' work with PolicyPlanner.plan (observe_one) only"
+            )
         pw, nw = super().select(rng)
         if self.noise > 0.0:
             pw = pw + self._noise_rng.standard_normal(pw.shape) * self.noise

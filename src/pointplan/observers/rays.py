@@ -76,7 +76,9 @@ class LocalRays(Observer):
     #: keep the ``n_points`` hits nearest to the body instead of a random subset
     nearest = False
 
-    def __init__(self, robot: Robot, n_points: int = 64, n_rays: int = 256, max_range: float = 0.7, spacing: float = 0.06) -> None:
+    def __init__(
+        self, robot: Robot, n_points: int = 64, n_rays: int = 256, max_range: float = 0.7, spacing: float = 0.06
+    ) -> None:
         if robot.dim != 3:
             raise ValueError("the ray-cast observation is implemented for 3D robots")
         super().__init__(robot)
@@ -191,5 +193,7 @@ class WideRays(LocalRays):
 
     name = "local-wide"
 
-    def __init__(self, robot: Robot, n_points: int = 128, n_rays: int = 1024, max_range: float = 2.0, spacing: float = 0.06) -> None:
+    def __init__(
+        self, robot: Robot, n_points: int = 128, n_rays: int = 1024, max_range: float = 2.0, spacing: float = 0.06
+    ) -> None:
         super().__init__(robot, n_points=n_points, n_rays=n_rays, max_range=max_range, spacing=spacing)

@@ -6,18 +6,25 @@ CVAE's samples: ``learned-sampling``, ``lsample-0.5``, ``lsample-0.9``), OMPL's 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from ..robots.base import Robot
 from .base import Planner, PlanResult, march, path_length
 from .birrt import BiRRT
 from .straight import StraightLine
 
+if TYPE_CHECKING:
+    from ..models.mpnet import MPNet
+    from .rollout import Escape
+
 #: name -> factory ``(robot, **kw) -> Planner``; add planners with :func:`register_planner`
 PLANNERS: dict[str, Callable[..., Planner]] = {"birrt": BiRRT, "straight": StraightLine}
 
 
-def _policy_factory(robot: Robot, checkpoint: str | None = None, observation: str | None = None, scene: str | None = None, **kw: Any) -> Planner:
+def _policy_factory(
+    robot: Robot, checkpoint: str | None = None, observation: str | None = None, scene: str | None = None, **kw: Any
+) -> Planner:
     """The policy planner: ``checkpoint`` (a path), or the policy that ships for ``robot``
     and ``observation`` (the one trained for ``scene``, a scenario's name, if one ships)."""
     from .policy import PolicyPlanner
@@ -28,7 +35,9 @@ def _policy_factory(robot: Robot, checkpoint: str | None = None, observation: st
         checkpoint = str(shipped_checkpoint(robot.name, observation, scene))
     planner = PolicyPlanner(checkpoint, robot=robot, **kw)
     if observation is not None and planner.policy.observation != observation:
-        raise ValueError(f"the policy {checkpoint} was trained on {planner.policy.observation!r} observations, not {observation!r}")
+        raise ValueError(
+            f"the policy {checkpoint} was trained on {planner.policy.observation!r} observations, not {observation!r}"
+        )
     return planner
 
 
@@ -46,7 +55,7 @@ def _hybrid_factory(
     stall_distance: float = 0.035,
     attempts: int = 1,
     action_noise: float = 1.0,
-    escape: Any = None,
+    escape: Escape | int | None = None,
     fallback: str = "birrt",
     time_limit: float | None = None,
     **kw: Any,
@@ -96,7 +105,7 @@ PLANNERS["hybrid-ompl"] = _hybrid_ompl_factory
 
 
 def _mpnet_factory(hybrid: bool) -> Callable[..., Planner]:
-    def make(robot: Robot, checkpoint: Any = None, **kw: Any) -> Planner:
+    def make(robot: Robot, checkpoint: str | Path | MPNet | None = None, **kw: Any) -> Planner:
         """MPNet (``checkpoint``: a path or a loaded ``MPNet``; default: the one that ships
         for ``robot``, ``disc2d`` or ``sphere3d``; a ValueError for other robots); keywords go to :class:`~pointplan.planners.mpnet.MPNetPlanner`
         (``seed``, ``max_nodes`` of the hybrid's Bi-RRT, ``replan_iters``, ...)."""
@@ -151,6 +160,8 @@ def make_planner(name: str, robot: Robot, **kw: Any) -> Planner:
     or any registered one). ``ompl:`` planners raise ``ImportError`` naming
     ``pip install 'pointplan[ompl]'`` when the optional ``ompl`` package is missing."""
     key = name.strip().lower()
+    for k, v in robot.planner_defaults(key).items():  # e.g. an arm's longer joint-space steps
+        kw.setdefault(k, v)
     if key.startswith("ompl:"):
         from .ompl import make_ompl_planner
 
@@ -158,7 +169,9 @@ def make_planner(name: str, robot: Robot, **kw: Any) -> Planner:
     try:
         factory = PLANNERS[key]
     except KeyError:
-        raise ValueError(f"unknown planner {name!r}; known: {', '.join(sorted(PLANNERS))}, ompl:NAME (e.g. ompl:RRTConnect)") from None
+        raise ValueError(
+            f"unknown planner {name!r}; known: {', '.join(sorted(PLANNERS))}, ompl:NAME (e.g. ompl:RRTConnect)"
+        ) from None
     return factory(robot, **kw)
 
 

@@ -128,7 +128,9 @@ def _motion(q0, tw, n, radius, low, high, box_c, box_r, box_h, fallback, end):  
             s1 = min(1 / n, 1.0)
             for i in range(d):
                 cfg1[i] = q0[i] + tw[i] * s1
-            if not _hits_boxes(cfg, r0 * r0, box_c, box_r, box_h) and not _hits_boxes(cfg1, r1 * r1, box_c, box_r, box_h):
+            if not _hits_boxes(cfg, r0 * r0, box_c, box_r, box_h) and not _hits_boxes(
+                cfg1, r1 * r1, box_c, box_r, box_h
+            ):
                 bad = False
             checks += 2
         out = False
@@ -221,7 +223,15 @@ def _edge_free(a, b, radius, resolution, low, high, box_c, box_r, box_h):  # typ
 
 
 def ball_edge_free(
-    a: np.ndarray, b: np.ndarray, radius: float, resolution: float, low: np.ndarray, high: np.ndarray, box_c: np.ndarray, box_r: np.ndarray, box_h: np.ndarray
+    a: np.ndarray,
+    b: np.ndarray,
+    radius: float,
+    resolution: float,
+    low: np.ndarray,
+    high: np.ndarray,
+    box_c: np.ndarray,
+    box_r: np.ndarray,
+    box_h: np.ndarray,
 ) -> tuple[bool, int]:
     """``edge_free`` of a ball among boxes (see :func:`_edge_free`)."""
     ok, n = _edge_free(a, b, float(radius), float(resolution), low, high, box_c, box_r, box_h)
@@ -298,7 +308,9 @@ def _select(u, count, n_points, idx):  # type: ignore[no-untyped-def]
 
 
 def pack_weights(
-    inp: tuple[np.ndarray, np.ndarray], hidden: list[tuple[np.ndarray, np.ndarray]], head: list[tuple[np.ndarray, np.ndarray]]
+    inp: tuple[np.ndarray, np.ndarray],
+    hidden: list[tuple[np.ndarray, np.ndarray]],
+    head: list[tuple[np.ndarray, np.ndarray]],
 ) -> tuple[np.ndarray, np.ndarray]:
     """A PointNet actor's weights (``NumpyPointNetActor``'s ``inp``, ``hidden``, ``head``;
     ``W`` as ``(in, out)``) as one float32 array and its layout: ``[width, features,
@@ -486,7 +498,8 @@ def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, 
     edges)`` (plain integers: nothing to unpack from an array afterwards)."""
     radius, substep, goal_tol = fparams[F_RADIUS], fparams[F_SUBSTEP], fparams[F_GOAL_TOL]
     stall_dist, resolution, s32 = fparams[F_STALL_DIST], fparams[F_RESOLUTION], fparams[F_S32]
-    horizon, stall_steps, n_points, action_dim = iparams[I_HORIZON], iparams[I_STALL_STEPS], iparams[I_N_POINTS], iparams[I_ACTION_DIM]
+    horizon, stall_steps = iparams[I_HORIZON], iparams[I_STALL_STEPS]
+    n_points, action_dim = iparams[I_N_POINTS], iparams[I_ACTION_DIM]
     esc_window, esc_still = iparams[I_ESC_WINDOW], fparams[F_ESC_STILL]
     greedy, connect, clip_target = iparams[I_GREEDY] != 0, iparams[I_CONNECT] != 0, iparams[I_CLIP] != 0
     d = q0.shape[0]
@@ -552,7 +565,7 @@ def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, 
                 end = END_ESCAPE
                 break
     rows = t + 1
-    if end == END_GREEDY or end == END_TOL_GOAL:  # the path ends at the goal
+    if end in (END_GREEDY, END_TOL_GOAL):  # the path ends at the goal
         for i in range(d):
             path[rows, i] = goal[i]
         rows += 1
@@ -590,5 +603,7 @@ def rollout_ball(
     collision checks, certified goal-edge checks made)``. (``PolicyPlanner`` calls
     :func:`_rollout` directly, with its arguments prepared once.)"""
     path = np.empty((int(iparams[I_HORIZON]) + 2, len(q0)))
-    end, rows, checks, certified = _rollout(q0, goal, low, high, *boxes, pts, nrm, *weights, scale, fparams, iparams, stream, path)
+    end, rows, checks, certified = _rollout(
+        q0, goal, low, high, *boxes, pts, nrm, *weights, scale, fparams, iparams, stream, path
+    )
     return int(end), path[:rows], int(checks), int(certified)

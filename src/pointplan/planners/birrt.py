@@ -50,7 +50,7 @@ def _embed(robot: Robot, q: Array) -> Array:
     for oriented robots the unit quaternion (w >= 0) times 2 (its chord is about half the
     rotation angle)."""
     q = np.asarray(q, np.float64)
-    if robot.config_dim == robot.dim:
+    if robot.euclidean:
         return q
     quat = q[..., robot.dim :]
     quat = np.where(quat[..., -1:] < 0, -quat, quat)
@@ -103,7 +103,7 @@ class _Tree:
 
             self._kd = cKDTree(_embed(robot, self.nodes[: self.n]))
             self._kd_n = self.n
-        exact = robot.config_dim == robot.dim
+        exact = robot.euclidean
         assert self._kd is not None
         _, cand = self._kd.query(_embed(robot, q), k=1 if exact else _KD_CANDIDATES)
         idx = np.concatenate([np.atleast_1d(cand), np.arange(self._kd_n, self.n)])
@@ -206,7 +206,9 @@ class BiRRT:
         deadline = t0 + self.time_limit if self.time_limit is not None else np.inf
         while trees[0].n + trees[1].n < self.max_nodes and time.perf_counter() < deadline:
             if k == len(samples):
-                samples = robot.sample_uniform(rng, _SAMPLE_BLOCK, low, high) if draw is None else draw(rng, _SAMPLE_BLOCK)
+                samples = (
+                    robot.sample_uniform(rng, _SAMPLE_BLOCK, low, high) if draw is None else draw(rng, _SAMPLE_BLOCK)
+                )
                 coins = rng.random(_SAMPLE_BLOCK)
                 k = 0
             ta, tb = trees[a], trees[1 - a]

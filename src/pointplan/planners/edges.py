@@ -19,12 +19,28 @@ _ONE_EDGE = 1e12
 
 
 def edge_free(
-    robot: Robot, problem_or_world: object, a: Array, b: Array, resolution: float = 0.01, low: Array | None = None, high: Array | None = None
+    robot: Robot,
+    problem_or_world: object,
+    a: Array,
+    b: Array,
+    resolution: float = 0.01,
+    low: Array | None = None,
+    high: Array | None = None,
 ) -> tuple[bool, int]:
     """Is the geodesic ``a -> b`` collision-free and inside the bounds (checked as one edge
     on the evaluator's grid, both ends included)? Returns the answer and the number of
     configurations checked. ``problem_or_world`` is what :func:`march` takes."""
-    m = march(robot, problem_or_world, np.asarray(a, np.float64), np.asarray(b, np.float64), _ONE_EDGE, resolution, 1, low, high)
+    m = march(
+        robot,
+        problem_or_world,
+        np.asarray(a, np.float64),
+        np.asarray(b, np.float64),
+        _ONE_EDGE,
+        resolution,
+        1,
+        low,
+        high,
+    )
     if m.checks == 0:  # a == b: march checks nothing, so check the configuration itself
         from .base import _world_and_bounds, check_free
 

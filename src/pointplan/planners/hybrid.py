@@ -82,12 +82,19 @@ class HybridPlanner:
         second = self.fallback.plan(sub)
         nodes = first.nodes + second.nodes
         checks = first.collision_checks + second.collision_checks
-        info.update(birrt_nodes=second.nodes, repaired=True, repaired_from=cut, fallback=getattr(self.fallback, "name", type(self.fallback).__name__))
+        info.update(
+            birrt_nodes=second.nodes,
+            repaired=True,
+            repaired_from=cut,
+            fallback=getattr(self.fallback, "name", type(self.fallback).__name__),
+        )
         dt = time.perf_counter() - t0
         if not second.success:
             return PlanResult.failure(robot.config_dim, nodes, checks, dt, info=info)
         full = np.concatenate([path[:cut], second.path])  # second.path starts at path[cut]
-        return PlanResult(path=full, success=True, nodes=nodes, collision_checks=checks, time_s=dt, trees=second.trees, info=info)
+        return PlanResult(
+            path=full, success=True, nodes=nodes, collision_checks=checks, time_s=dt, trees=second.trees, info=info
+        )
 
 
 __all__ = ["HybridPlanner"]

@@ -17,7 +17,7 @@ without a ``checkpoint`` the one shipped for the robot is used.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,6 +25,12 @@ from ..robots.base import Robot
 from ..scenes.scene import Problem
 from .base import PlanResult
 from .birrt import BiRRT, DrawSamples
+
+if TYPE_CHECKING:
+    import torch
+
+    #: the network's condition for a problem, with the problem's normalised start and goal
+    Condition = tuple[torch.Tensor, torch.Tensor, torch.Tensor]
 
 #: the sampler networks that ship, by robot name (files in ``pointplan/data``)
 SHIPPED_SAMPLERS = {"disc2d": "narrow2d_lsample_cvae.pt"}
@@ -41,7 +47,9 @@ def shipped_sampler(robot: str = "disc2d") -> Path:
     path = Path(str(files("pointplan") / "data" / name)) if name else None
     if path is None or not path.is_file():
         have = ", ".join(sorted(SHIPPED_SAMPLERS)) or "none"
-        raise ValueError(f"no learned sampler ships for robot {robot!r} (shipped: {have}); pass checkpoint=PATH, or train one with `pointplan lsample-train`")
+        raise ValueError(
+            f"no learned sampler ships for robot {robot!r} (shipped: {have}); pass checkpoint=PATH, or train one with `pointplan lsample-train`"
+        )
     return path
 
 
@@ -64,7 +72,9 @@ class LearnedSampler:
             raise ValueError(f"learned sampling samples positions: robot {robot.name} has orientations")
         data = load_checkpoint(checkpoint)
         if data.get("kind") != CHECKPOINT_KIND:
-            raise CheckpointError(f"{checkpoint}: not a learned-sampling network (train one with `pointplan lsample-train`)")
+            raise CheckpointError(
+                f"{checkpoint}: not a learned-sampling network (train one with `pointplan lsample-train`)"
+            )
         if data["robot"] != robot.name:
             raise CheckpointError(f"{checkpoint} was trained for robot {data['robot']!r}, not {robot.name!r}")
         self.robot, self.lam, self.checkpoint = robot, float(lam), str(checkpoint)
@@ -78,7 +88,7 @@ class LearnedSampler:
         self.drawn = 0
         self._torch = torch
 
-    def condition(self, problem: Problem) -> Any:
+    def condition(self, problem: Problem) -> Condition:
         """The network's condition for ``problem`` (a ``(1, c_dim)`` tensor) and its
         normalised start and goal."""
         from ..models.cvae import normalise, scene_cloud
@@ -91,7 +101,7 @@ class LearnedSampler:
         with torch.no_grad():
             return self.net.condition(t(cloud[None].astype(np.float32)), start, goal), start, goal
 
-    def decode(self, cond: Any, z: np.ndarray) -> np.ndarray:
+    def decode(self, cond: Condition, z: np.ndarray) -> np.ndarray:
         """Configurations decoded from latents ``z: (k, latent)`` under the condition
         :meth:`condition` gave."""
         from ..models.cvae import denormalise
@@ -132,7 +142,9 @@ class LearnedSamplingPlanner(BiRRT):
     ``lam``. Other keywords are Bi-RRT's. ``info`` of a result has ``lambda`` and
     ``learned_samples`` (network samples drawn, used or not)."""
 
-    def __init__(self, robot: Robot, lam: float = 0.5, checkpoint: str | Path | None = None, name: str | None = None, **kw: Any) -> None:
+    def __init__(
+        self, robot: Robot, lam: float = 0.5, checkpoint: str | Path | None = None, name: str | None = None, **kw: Any
+    ) -> None:
         if not checkpoint or checkpoint == "shipped":
             checkpoint = shipped_sampler(robot.name)
         self.learned = LearnedSampler(checkpoint, robot, lam)
@@ -149,10 +161,19 @@ class LearnedSamplingPlanner(BiRRT):
         return result
 
 
-def learned_sampling_factory(robot: Robot, lam: float = 0.5, checkpoint: str | None = None, **kw: Any) -> LearnedSamplingPlanner:
+def learned_sampling_factory(
+    robot: Robot, lam: float = 0.5, checkpoint: str | None = None, **kw: Any
+) -> LearnedSamplingPlanner:
     """``learned-sampling``: Bi-RRT with a fraction ``lam`` of learned samples; the
     network of ``checkpoint`` or the one shipped for ``robot``."""
     return LearnedSamplingPlanner(robot, lam=lam, checkpoint=checkpoint, **kw)
 
 
-__all__ = ["CHECKPOINT_KIND", "SHIPPED_SAMPLERS", "LearnedSampler", "LearnedSamplingPlanner", "learned_sampling_factory", "shipped_sampler"]
+__all__ = [
+    "CHECKPOINT_KIND",
+    "SHIPPED_SAMPLERS",
+    "LearnedSampler",
+    "LearnedSamplingPlanner",
+    "learned_sampling_factory",
+    "shipped_sampler",
+]

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -54,6 +54,9 @@ from ..robots.motion import segments_free
 from ..scenes.scene import Problem, Scene
 from .base import Array, PlanResult, check_free
 from .birrt import BiRRT
+
+if TYPE_CHECKING:
+    from ..models.mpnet import MPNet
 
 #: candidate edges contraction checks in one validator call (farthest first)
 _CONTRACT_BATCH = 16
@@ -98,7 +101,9 @@ class EdgeChecker:
 
     def _run(self, a: Array, b: Array) -> tuple[np.ndarray, np.ndarray]:
         s = self.scene
-        free, used = segments_free(self.robot, s.world, np.atleast_2d(a), np.atleast_2d(b), self.resolution, s.low, s.high)
+        free, used = segments_free(
+            self.robot, s.world, np.atleast_2d(a), np.atleast_2d(b), self.resolution, s.low, s.high
+        )
         return np.asarray(free, bool), np.asarray(used, np.int64)
 
     def free(self, a: Array, b: Array) -> bool:
@@ -194,7 +199,7 @@ class MPNetPlanner:
 
     def __init__(
         self,
-        model: Any,
+        model: str | Path | MPNet,
         robot: Robot | None = None,
         hybrid: bool = False,
         neural_steps: int = 50,
@@ -248,7 +253,9 @@ class MPNetPlanner:
         return self.net.encode(encoder_input(pts, nrm, self.net.center, self.net.step))
 
     # ------------------------------------------------------------------ pieces
-    def neural_plan(self, z: np.ndarray, a: Array, b: Array, steps: int, edges: EdgeChecker, rng: np.random.Generator | None) -> tuple[Array, bool, int]:
+    def neural_plan(
+        self, z: np.ndarray, a: Array, b: Array, steps: int, edges: EdgeChecker, rng: np.random.Generator | None
+    ) -> tuple[Array, bool, int]:
         """Bidirectional neural planning from ``a`` to ``b``: ``(path, connected, proposals)``;
         the path runs from ``a`` to ``b`` (joined by an unchecked edge when not connected)."""
         scene = edges.scene
@@ -275,7 +282,9 @@ class MPNetPlanner:
         ok = edges.states_free(path[1:-1])
         return np.concatenate([path[:1], path[1:-1][ok], path[-1:]])
 
-    def _replan(self, z: np.ndarray, path: Array, edges: EdgeChecker, rng: np.random.Generator | None) -> tuple[Array, int]:
+    def _replan(
+        self, z: np.ndarray, path: Array, edges: EdgeChecker, rng: np.random.Generator | None
+    ) -> tuple[Array, int]:
         path = self._drop_colliding(path, edges)
         pieces = [path[:1]]
         nodes = 0
@@ -336,13 +345,19 @@ class MPNetPlanner:
             else:
                 path = contract(robot, np.concatenate(pieces), edges)
                 ok = bool(edges.all_free(path).all())
-        info.update(neural_nodes=nodes, birrt_nodes=birrt_nodes, stage=stage if ok else (stage if stage == "birrt-failed" else "failed"))
+        info.update(
+            neural_nodes=nodes,
+            birrt_nodes=birrt_nodes,
+            stage=stage if ok else (stage if stage == "birrt-failed" else "failed"),
+        )
         total_nodes = nodes + birrt_nodes
         checks = edges.checks + birrt_checks
         dt = time.perf_counter() - t0
         if not ok:
             return PlanResult.failure(cdim, total_nodes, checks, dt, raw_path=raw, info=info)
-        return PlanResult(path=path, success=True, nodes=total_nodes, collision_checks=checks, time_s=dt, raw_path=raw, info=info)
+        return PlanResult(
+            path=path, success=True, nodes=total_nodes, collision_checks=checks, time_s=dt, raw_path=raw, info=info
+        )
 
 
 __all__ = ["EdgeChecker", "MPNetPlanner", "contract", "scene_points"]

@@ -8,8 +8,9 @@ optional dependency: ``pip install 'pointplan[ompl]'``.
 
 The search runs in C++; what a configuration costs is answered by pointplan:
 
-- the state space is ``RealVectorStateSpace(2)`` for the disc, ``(3)`` for the sphere and
-  ``SE3StateSpace`` for the S-shape, bounded by the scene's workspace bounds;
+- the state space is ``RealVectorStateSpace(2)`` for the disc, ``(3)`` for the sphere,
+  ``SE3StateSpace`` for the S-shape, bounded by the scene's workspace bounds, and
+  ``RealVectorStateSpace(n)`` for an arm's ``n`` joints, bounded by the joint limits;
 - the state validity checker is ``robot.collides`` plus the bounds test (one configuration);
 - the motion validator (``motion_check="pointplan"``, the default) checks the robot's own
   geodesic between two states with :func:`~pointplan.planners.edges.edge_free`, the edge
@@ -126,7 +127,7 @@ class OMPLPlanner:
         seed: int | None = None,
     ) -> None:
         _ompl()
-        if robot.name not in ("disc2d", "sphere3d", "sshape"):
+        if not (robot.euclidean or robot.name == "sshape"):
             raise ValueError(f"no OMPL state space for robot {robot.name!r}")
         if motion_check not in ("pointplan", "ompl"):
             raise ValueError(f"motion_check must be 'pointplan' or 'ompl', not {motion_check!r}")
@@ -148,7 +149,7 @@ class OMPLPlanner:
 
     # ------------------------------------------------------------------ states
     def _space(self, ob: Any, low: np.ndarray, high: np.ndarray) -> Any:
-        d = self.robot.dim
+        d = self.robot.dim if self.robot.name == "sshape" else self.robot.config_dim
         bounds = ob.RealVectorBounds(d)
         for i in range(d):
             bounds.setLow(i, float(low[i]))
@@ -166,7 +167,7 @@ class OMPLPlanner:
                 return np.array([s.getX(), s.getY(), s.getZ(), r.x, r.y, r.z, r.w])
 
             return read
-        d = self.robot.dim
+        d = self.robot.config_dim
         if d == 2:
             return lambda s: np.array([s[0], s[1]])
         return lambda s: np.array([s[i] for i in range(d)])
@@ -179,7 +180,7 @@ class OMPLPlanner:
             r = s.rotation()
             r.x, r.y, r.z, r.w = (float(v) for v in quat)
             return
-        for i in range(self.robot.dim):
+        for i in range(self.robot.config_dim):
             s[i] = float(q[i])
 
     # ------------------------------------------------------------------ planning
@@ -248,4 +249,11 @@ def make_ompl_planner(robot: Robot, planner: str = "RRTConnect", **kw: Any) -> O
     return OMPLPlanner(robot, planner, **kw)
 
 
-__all__ = ["OMPL_MISSING", "OMPLPlanner", "have_ompl", "make_ompl_planner", "ompl_planner_names", "resolve_planner_name"]
+__all__ = [
+    "OMPL_MISSING",
+    "OMPLPlanner",
+    "have_ompl",
+    "make_ompl_planner",
+    "ompl_planner_names",
+    "resolve_planner_name",
+]

@@ -28,7 +28,15 @@ from ..envs.core import EnvConfig
 from ..robots.base import Robot
 from ..scenes.scene import Problem
 from .base import PlanResult
-from .rollout import ESCAPE_DEFAULTS, Escape, RolloutEngine, RolloutOptions, connect_to_goal, rollout_batch, torch_threads
+from .rollout import (
+    ESCAPE_DEFAULTS,
+    Escape,
+    RolloutEngine,
+    RolloutOptions,
+    connect_to_goal,
+    rollout_batch,
+    torch_threads,
+)
 
 _OPTION_NAMES = frozenset(f.name for f in fields(RolloutOptions))
 
@@ -77,7 +85,9 @@ class PolicyPlanner:
 
         unknown = set(option_fields) - _OPTION_NAMES
         if unknown:
-            raise TypeError(f"PolicyPlanner got unknown options {', '.join(sorted(unknown))}; known: {', '.join(sorted(_OPTION_NAMES))}")
+            raise TypeError(
+                f"PolicyPlanner got unknown options {', '.join(sorted(unknown))}; known: {', '.join(sorted(_OPTION_NAMES))}"
+            )
         if isinstance(policy, (str, Path)):
             policy = Policy.from_checkpoint(policy)
         if not isinstance(policy, Policy):
@@ -128,10 +138,23 @@ class PolicyPlanner:
         one by one; its observations are drawn for the batch, so a rollout may differ from
         ``plan``'s). One by one also with an ``observer_wrapper``, ``draws > 1`` or
         ``attempts > 1``."""
-        one_by_one = self.engine.one_robot() or self.engine.observer_wrapper is not None or self.options.draws > 1 or self.options.attempts > 1
+        one_by_one = (
+            self.engine.one_robot()
+            or self.engine.observer_wrapper is not None
+            or self.options.draws > 1
+            or self.options.attempts > 1
+        )
         if one_by_one:
             return [self.plan(p) for p in problems]
         return self.engine.run(problems)
 
 
-__all__ = ["ESCAPE_DEFAULTS", "Escape", "PolicyPlanner", "RolloutOptions", "connect_to_goal", "rollout_batch", "torch_threads"]
+__all__ = [
+    "ESCAPE_DEFAULTS",
+    "Escape",
+    "PolicyPlanner",
+    "RolloutOptions",
+    "connect_to_goal",
+    "rollout_batch",
+    "torch_threads",
+]

@@ -186,7 +186,9 @@ class _GivenProblems(Scenario):
         raise RuntimeError("rollouts play given problems only")
 
 
-def connect_to_goal(robot: Robot, problem: Problem, result: PlanResult, resolution: float = GOAL_EDGE_RESOLUTION, t: int | None = None) -> PlanResult:
+def connect_to_goal(
+    robot: Robot, problem: Problem, result: PlanResult, resolution: float = GOAL_EDGE_RESOLUTION, t: int | None = None
+) -> PlanResult:
     """End a successful rollout at the goal itself when the geodesic from its last
     configuration to the goal is free (checked like a Bi-RRT edge, at ``resolution``; in a
     scene whose obstacles move, against the obstacles at time ``t``, the step the
@@ -228,10 +230,14 @@ class GoalTester:
         self.robot, self.scene, self.goal, self.resolution = robot, scene, goal, resolution
         world = scene.world
         self.boxes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        if isinstance(robot, (Disc2D, Sphere3D)) and world.batch_shape == () and all(type(o) is Box for o in scene.obstacles):
-            if world.box_c.shape[0] == len(scene.obstacles):
-                f = np.ascontiguousarray
-                self.boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        if (
+            isinstance(robot, (Disc2D, Sphere3D))
+            and world.batch_shape == ()
+            and all(type(o) is Box for o in scene.obstacles)
+            and world.box_c.shape[0] == len(scene.obstacles)
+        ):
+            f = np.ascontiguousarray
+            self.boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
         self.radius = float(getattr(robot, "radius", 0.0)) * (1.0 - 1e-9)
 
     def free(self, q: np.ndarray, certify: bool = True) -> tuple[bool, int]:
@@ -365,7 +371,9 @@ def _loop(sp: _Stepper, st: _State, horizon: int, opts: RolloutOptions, esc: Esc
     _try_goal(sp, st, ~st.success)  # where the rollouts that did not arrive stopped
 
 
-def _results(st: _State, problems: Sequence[Problem], robot: Robot, opts: RolloutOptions, esc: Escape, dt: float) -> list[PlanResult]:
+def _results(
+    st: _State, problems: Sequence[Problem], robot: Robot, opts: RolloutOptions, esc: Escape, dt: float
+) -> list[PlanResult]:
     """One :class:`PlanResult` per robot of a finished loop (``dt`` seconds each)."""
     out = []
     for i, p in enumerate(problems):
@@ -375,7 +383,13 @@ def _results(st: _State, problems: Sequence[Problem], robot: Robot, opts: Rollou
             res = PlanResult(path=path, success=True, nodes=k - 1, collision_checks=int(st.checks[i]), time_s=dt)
             res.info.update({"end": "goal", "goal_connection": "free", "greedy_goal": True})
         else:
-            res = PlanResult(path=st.paths[:k, i].copy(), success=bool(st.success[i]), nodes=k - 1, collision_checks=int(st.checks[i]), time_s=dt)
+            res = PlanResult(
+                path=st.paths[:k, i].copy(),
+                success=bool(st.success[i]),
+                nodes=k - 1,
+                collision_checks=int(st.checks[i]),
+                time_s=dt,
+            )
             if st.crushed[i] and opts.crush_ends:
                 res.info["end"] = "crushed"
             elif st.stalled[i]:
@@ -452,7 +466,13 @@ class _Timing:
     goal: float = 0.0
 
     def split(self, steps: int) -> dict[str, float]:
-        return {"observe": self.observe, "network": self.network, "motion": self.motion, "goal": self.goal, "steps": steps}
+        return {
+            "observe": self.observe,
+            "network": self.network,
+            "motion": self.motion,
+            "goal": self.goal,
+            "steps": steps,
+        }
 
 
 class _OneRobot(_Stepper):
@@ -462,7 +482,9 @@ class _OneRobot(_Stepper):
     :meth:`RolloutEngine._lean_step`). Normal draws come from ``nrng`` only where an
     action is sampled: at an escape's steps, and at every step of a sampled attempt."""
 
-    def __init__(self, engine: RolloutEngine, problem: Problem, nrng: np.random.Generator | None, sampled: bool) -> None:
+    def __init__(
+        self, engine: RolloutEngine, problem: Problem, nrng: np.random.Generator | None, sampled: bool
+    ) -> None:
         self.engine, self.robot, self.problem = engine, engine.robot, problem
         self.scene = problem.scene
         self.goal = np.asarray(problem.goal, np.float64)
@@ -495,13 +517,25 @@ class _OneRobot(_Stepper):
         tb = ta  # observing and acting interleaved are timed as network
         if self.lean is not None and not esc:  # observation and network in one
             lean = self.lean
-            a = lean(q, self.goal, u) if k == 1 else np.mean([lean(q, self.goal, u[j * per_step : (j + 1) * per_step]) for j in range(k)], 0)
+            a = (
+                lean(q, self.goal, u)
+                if k == 1
+                else np.mean([lean(q, self.goal, u[j * per_step : (j + 1) * per_step]) for j in range(k)], 0)
+            )
         elif k == 1:
             obs = observer.observe_one(q, u=u)
             tb = time.perf_counter()
             a = eng._act(obs, q, target[0], self._noise(esc))
         else:
-            a = np.mean([eng._act(observer.observe_one(q, u=u[j * per_step : (j + 1) * per_step]), q, target[0], self._noise(esc)) for j in range(k)], 0)
+            a = np.mean(
+                [
+                    eng._act(
+                        observer.observe_one(q, u=u[j * per_step : (j + 1) * per_step]), q, target[0], self._noise(esc)
+                    )
+                    for j in range(k)
+                ],
+                0,
+            )
         tc = time.perf_counter()
         self.timing.observe += tb - ta
         self.timing.network += tc - tb
@@ -511,7 +545,16 @@ class _OneRobot(_Stepper):
         tc = time.perf_counter()
         sc = self.scene
         tw = np.clip(a.astype(np.float64), -1.0, 1.0) * self.scale
-        q, collided, n = q_free(self.robot, sc.world, st.q, tw, sc.low[None], sc.high[None], self.engine.env.substep, clip_target=self.clip_target)
+        q, collided, n = q_free(
+            self.robot,
+            sc.world,
+            st.q,
+            tw,
+            sc.low[None],
+            sc.high[None],
+            self.engine.env.substep,
+            clip_target=self.clip_target,
+        )
         arrived = goal_reached(self.robot, self.engine.env, q, self.goal[None], collided)
         self.timing.motion += time.perf_counter() - tc
         return q, arrived, np.zeros(1, bool), n
@@ -564,7 +607,12 @@ class RolloutEngine:
         self._stream = np.empty(0)
 
     # -------------------------------------------------------------- many problems
-    def run(self, problems: Sequence[Problem], noise_rng: np.random.Generator | None = None, options: RolloutOptions | None = None) -> list[PlanResult]:
+    def run(
+        self,
+        problems: Sequence[Problem],
+        noise_rng: np.random.Generator | None = None,
+        options: RolloutOptions | None = None,
+    ) -> list[PlanResult]:
         """Roll out every problem, ``options.chunk`` at a time in lockstep (the time of a
         chunk is shared equally by its problems); the greedy goal test in static scenes.
         Actions are sampled where ``options.noise > 0`` and during escapes, from
@@ -576,7 +624,11 @@ class RolloutEngine:
             probs = list(problems[c0 : c0 + opts.chunk])
             t0 = time.perf_counter()
             rng = np.random.default_rng(np.random.SeedSequence([opts.seed, c0]))
-            nrng = noise_rng if noise_rng is not None else np.random.default_rng(np.random.SeedSequence([opts.seed, c0, 0x6E6F6973]))
+            nrng = (
+                noise_rng
+                if noise_rng is not None
+                else np.random.default_rng(np.random.SeedSequence([opts.seed, c0, 0x6E6F6973]))
+            )
             sp = _Lockstep(act, self.robot, self.env, probs, rng, nrng, opts.noise, self.escape)
             greedy = np.array([opts.greedy_goal and not p.scene.dynamic for p in probs])
             st = _State(sp.core.q.copy(), sp.core.goal.copy(), self.horizon, greedy)
@@ -592,18 +644,27 @@ class RolloutEngine:
         rollouts in any order."""
         opts = self.options
         if opts.attempts > 1 and problem.scene.dynamic:
-            raise ValueError("attempts > 1 plans static scenes only: a rollout among moving obstacles cannot start over")
+            raise ValueError(
+                "attempts > 1 plans static scenes only: a rollout among moving obstacles cannot start over"
+            )
         if problem.scene.dynamic and (self.observer_wrapper is not None or opts.draws > 1):
             raise ValueError("observer_wrapper and draws > 1 plan static scenes only")
         if np.shape(problem.start) != (self.robot.config_dim,):
             raise ValueError(f"problem {problem.tag or ''} does not fit robot {self.robot.name}")
-        key = zlib.crc32(np.ascontiguousarray(problem.start, np.float64).tobytes() + np.ascontiguousarray(problem.goal, np.float64).tobytes())
-        first = self._attempt(problem, np.random.default_rng(np.random.SeedSequence([opts.seed, 0, key, 0x657363])), sampled=False)
+        key = zlib.crc32(
+            np.ascontiguousarray(problem.start, np.float64).tobytes()
+            + np.ascontiguousarray(problem.goal, np.float64).tobytes()
+        )
+        first = self._attempt(
+            problem, np.random.default_rng(np.random.SeedSequence([opts.seed, 0, key, 0x657363])), sampled=False
+        )
         if first.success or opts.attempts == 1:
             return first
         tried = [first]
         for k in range(1, opts.attempts):
-            tried.append(self._attempt(problem, np.random.default_rng(np.random.SeedSequence([opts.seed, k, key])), sampled=True))
+            tried.append(
+                self._attempt(problem, np.random.default_rng(np.random.SeedSequence([opts.seed, k, key])), sampled=True)
+            )
             if tried[-1].success:
                 break
         last = tried[-1]
@@ -650,10 +711,17 @@ class RolloutEngine:
             if res is not None:
                 return res
             if handover is not None:
-                st = _State.resumed(handover[0], np.asarray(problem.goal, np.float64), self.horizon, opts.greedy_goal, handover[1])
+                st = _State.resumed(
+                    handover[0], np.asarray(problem.goal, np.float64), self.horizon, opts.greedy_goal, handover[1]
+                )
         sp = _OneRobot(self, problem, nrng, sampled)
         if st is None:
-            st = _State(np.asarray(problem.start, np.float64)[None].copy(), sp.goal[None].copy(), self.horizon, np.array([opts.greedy_goal]))
+            st = _State(
+                np.asarray(problem.start, np.float64)[None].copy(),
+                sp.goal[None].copy(),
+                self.horizon,
+                np.array([opts.greedy_goal]),
+            )
         else:  # the compiled rollout stopped where an escape starts
             st.left[0], st.escapes[0] = self.escape.steps, 1
             if self.escape.subgoal:

@@ -17,7 +17,7 @@ table.
 from __future__ import annotations
 
 import time
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -27,13 +27,17 @@ from ..scenes.scene import Problem, Scene
 from . import _policy_kernels as K
 from .base import PlanResult
 
+if TYPE_CHECKING:
+    from ..envs.core import EnvConfig
+    from ..robots.base import Robot
+
 
 class EngineView(Protocol):
     """What the compiled rollout reads of its rollout engine."""
 
     fast: Any
-    robot: Any
-    env: Any
+    robot: Robot
+    env: EnvConfig
     options: Any
     escape: Any
     horizon: int
@@ -52,7 +56,14 @@ END_NAMES = ("horizon", "stalled", "goal", "goal", "near-goal", "near-goal", "es
 class CompiledBall:
     """The compiled rollout of one engine (see the module's docstring); made by :meth:`build`."""
 
-    def __init__(self, engine: EngineView, weights: tuple[np.ndarray, np.ndarray], scale: np.ndarray, fparams: np.ndarray, iparams: np.ndarray) -> None:
+    def __init__(
+        self,
+        engine: EngineView,
+        weights: tuple[np.ndarray, np.ndarray],
+        scale: np.ndarray,
+        fparams: np.ndarray,
+        iparams: np.ndarray,
+    ) -> None:
         self.engine = engine
         self.args = (*weights, scale, fparams, iparams)
         self._scene: Scene | None = None
@@ -81,7 +92,18 @@ class CompiledBall:
             esc.still if esc.on else 0.0,
         )
         iparams = np.zeros(8, np.int64)
-        iparams[[K.I_HORIZON, K.I_STALL_STEPS, K.I_GREEDY, K.I_CONNECT, K.I_CLIP, K.I_N_POINTS, K.I_ACTION_DIM, K.I_ESC_WINDOW]] = [
+        iparams[
+            [
+                K.I_HORIZON,
+                K.I_STALL_STEPS,
+                K.I_GREEDY,
+                K.I_CONNECT,
+                K.I_CLIP,
+                K.I_N_POINTS,
+                K.I_ACTION_DIM,
+                K.I_ESC_WINDOW,
+            ]
+        ] = [
             int(engine.horizon),
             int(opts.stall_steps or 0),
             int(opts.greedy_goal),
@@ -91,9 +113,17 @@ class CompiledBall:
             int(fast.action_dim),
             int(esc.window) if esc.on else 0,  # the compiled rollout stops where an escape starts
         ]
-        return cls(engine, K.pack_weights(fast.inp, fast.hidden, fast.head), np.ascontiguousarray(robot.action_scale, np.float64), fparams, iparams)
+        return cls(
+            engine,
+            K.pack_weights(fast.inp, fast.hidden, fast.head),
+            np.ascontiguousarray(robot.action_scale, np.float64),
+            fparams,
+            iparams,
+        )
 
-    def rollout(self, problem: Problem, t0: float) -> tuple[PlanResult | None, tuple[np.ndarray, int] | None, float | None]:
+    def rollout(
+        self, problem: Problem, t0: float
+    ) -> tuple[PlanResult | None, tuple[np.ndarray, int] | None, float | None]:
         """``(result, None, None)``: the whole rollout; ``(None, (path, checks), seconds)``:
         it stopped where an escape starts, and the step loop goes on from there; ``(None,
         None, None)``: the scene is not boxes only (or has no points)."""
@@ -115,7 +145,17 @@ class CompiledBall:
             return None, (path[:rows].copy(), int(checks)), t2 - t1
         success, to_goal, entries = self._end_entries[end]
         steps = rows - 1 - to_goal
-        info = {"time_split": {"observe": 0.0, "network": 0.0, "motion": 0.0, "goal": 0.0, "compiled": t2 - t1, "steps": steps}, **entries}
+        info = {
+            "time_split": {
+                "observe": 0.0,
+                "network": 0.0,
+                "motion": 0.0,
+                "goal": 0.0,
+                "compiled": t2 - t1,
+                "steps": steps,
+            },
+            **entries,
+        }
         return PlanResult(path[:rows], success, steps, checks, time.perf_counter() - t0, info=info), None, None
 
     def _scene_inputs(self, scene: Scene) -> tuple[Any, ...] | None:
@@ -126,7 +166,11 @@ class CompiledBall:
         observer = self.engine.observer
         observer.set_scene(0, scene)
         world, obstacles = scene.world, scene.obstacles
-        if world.batch_shape != () or world.box_c.shape[0] != len(obstacles) or not all(type(o) is Box for o in obstacles):
+        if (
+            world.batch_shape != ()
+            or world.box_c.shape[0] != len(obstacles)
+            or not all(type(o) is Box for o in obstacles)
+        ):
             return None
         pts, nrm = observer.points_one()
         if not len(pts):

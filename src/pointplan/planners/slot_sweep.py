@@ -50,7 +50,10 @@ class WallClearance:
         if not boxes or len(boxes) != len(problem.scene.obstacles):
             raise ValueError("the wall's clearance needs a scene of boxes (a Slot wall)")
         self.bars = [(coal.Box(*(2 * h)), c) for c, h in zip(parts.box_centers, parts.box_halfs, strict=True)]
-        self.wall = [(coal.Box(*o.size), coal.Transform3s(np.asarray(o.rotation, np.float64), np.asarray(o.center, np.float64))) for o in boxes]
+        self.wall = [
+            (coal.Box(*o.size), coal.Transform3s(np.asarray(o.rotation, np.float64), np.asarray(o.center, np.float64)))
+            for o in boxes
+        ]
         self.req = coal.DistanceRequest()
         self.req.enable_signed_distance = True
         # the wall: boxes spanning the plane x = plane, half_wall thick; a bar's reach: its half diagonal
@@ -94,7 +97,15 @@ class Sweep:
     the opening coordinates ``u`` (along the slot's long and thin axes) of the centreline
     point in the opening."""
 
-    def __init__(self, robot: SShape, problem: Problem, order: str, rng: np.random.Generator, min_clearance: float = 0.0015, guide: float = 0.0) -> None:
+    def __init__(
+        self,
+        robot: SShape,
+        problem: Problem,
+        order: str,
+        rng: np.random.Generator,
+        min_clearance: float = 0.0015,
+        guide: float = 0.0,
+    ) -> None:
         slot = problem.scene.__dict__["slot"]
         self.problem, self.rng, self.min_clearance = problem, rng, float(min_clearance)
         #: with ``guide > 0``, the sweep toward a bend is pulled to a free pose of the bend in
@@ -102,7 +113,11 @@ class Sweep:
         #: the bar that leads there)
         self.guide, self.w_target = float(guide), 0.0
         self.target: np.ndarray | None = None
-        width, self.mid, long_axis = float(slot["width"]), np.asarray(slot["center"], np.float64), int(slot["long_axis"])
+        width, self.mid, long_axis = (
+            float(slot["width"]),
+            np.asarray(slot["center"], np.float64),
+            int(slot["long_axis"]),
+        )
         self.e_long, self.e_thin = np.eye(3)[long_axis], np.eye(3)[3 - long_axis]
         self.half = np.array([0.2, width / 2])
         self.cap = max((width - 0.036) / 2 * 0.6, 0.002)  # the clearance asked for, below what the slot allows
@@ -126,11 +141,15 @@ class Sweep:
         rot, pos, u = self.pose(v, rot0, s)
         cl = self.clear(rot, pos, self.cap)
         x = (self.sample_pts @ rot.T + pos)[:, 0]
-        side = np.sum(np.maximum(0.0, -x[self.samples < s - 0.02])) + np.sum(np.maximum(0.0, x[self.samples > s + 0.02]))
+        side = np.sum(np.maximum(0.0, -x[self.samples < s - 0.02])) + np.sum(
+            np.maximum(0.0, x[self.samples > s + 0.02])
+        )
         pull = 0.0
         if self.target is not None and self.w_target > 0:
             pull = self.w_target * float(np.sum(Rotation.from_matrix(self.target.T @ rot).as_rotvec() ** 2))
-        return float(-20.0 * min(cl, self.cap) + 2.0 * side + w_cont * (np.sum(v[:3] ** 2) + 10.0 * np.sum((u - u0) ** 2)) + pull)
+        return float(
+            -20.0 * min(cl, self.cap) + 2.0 * side + w_cont * (np.sum(v[:3] ** 2) + 10.0 * np.sum((u - u0) ** 2)) + pull
+        )
 
     def bend_poses(self, k: int, starts: int = 16) -> list[np.ndarray]:
         """Rotations of free poses with the centreline's corner ``k`` in the opening (the
@@ -140,7 +159,13 @@ class Sweep:
         for _ in range(starts):
             rot0 = Rotation.random(random_state=self.rng).as_matrix()
             v0 = np.concatenate([np.zeros(3), self.rng.normal(0, 0.3, 2)])
-            r = minimize(self.cost, v0, args=(rot0, np.zeros(2), float(self.arc[k]), 0.0), method="Nelder-Mead", options={"maxiter": 800})
+            r = minimize(
+                self.cost,
+                v0,
+                args=(rot0, np.zeros(2), float(self.arc[k]), 0.0),
+                method="Nelder-Mead",
+                options={"maxiter": 800},
+            )
             rot, pos, _ = self.pose(r.x, rot0, float(self.arc[k]))
             if self.clear(rot, pos) >= self.min_clearance:
                 found.append(rot)
@@ -158,7 +183,11 @@ class Sweep:
             return
         if k not in cache:
             poses = self.bend_poses(k)
-            cache[k] = [min(poses, key=lambda r: float(np.linalg.norm(Rotation.from_matrix(r.T @ rot).as_rotvec())))] if poses else []
+            cache[k] = (
+                [min(poses, key=lambda r: float(np.linalg.norm(Rotation.from_matrix(r.T @ rot).as_rotvec())))]
+                if poses
+                else []
+            )
         self.target = cache[k][0] if cache[k] else None
         self.w_target = self.guide * (s - self.arc[k - 1]) / (self.arc[k] - self.arc[k - 1])
 
@@ -168,7 +197,13 @@ class Sweep:
         for _ in range(40):
             rot0 = Rotation.random(random_state=self.rng).as_matrix()
             v0 = np.concatenate([np.zeros(3), self.rng.normal(0, 0.3, 2)])
-            r = minimize(self.cost, v0, args=(rot0, np.zeros(2), 0.0, 0.0), method="Nelder-Mead", options={"maxiter": 800, "xatol": 1e-6, "fatol": 1e-9})
+            r = minimize(
+                self.cost,
+                v0,
+                args=(rot0, np.zeros(2), 0.0, 0.0),
+                method="Nelder-Mead",
+                options={"maxiter": 800, "xatol": 1e-6, "fatol": 1e-9},
+            )
             if best is None or r.fun < best[0]:
                 best = (r.fun, r.x, rot0)
         assert best is not None
@@ -182,7 +217,13 @@ class Sweep:
         cands = []
         for k in range(8):
             v0 = np.concatenate([np.zeros(3) if k == 0 else self.rng.normal(0, 0.15, 3), vu])
-            r = minimize(self.cost, v0, args=(rot, u, s, 0.02), method="Nelder-Mead", options={"maxiter": 600, "xatol": 1e-6, "fatol": 1e-9})
+            r = minimize(
+                self.cost,
+                v0,
+                args=(rot, u, s, 0.02),
+                method="Nelder-Mead",
+                options={"maxiter": 600, "xatol": 1e-6, "fatol": 1e-9},
+            )
             nrot, npos, nu = self.pose(r.x, rot, s)
             cl = self.clear(nrot, npos)
             cands.append((cl >= self.min_clearance, -float(np.linalg.norm(r.x[:3])), cl, nrot, nu))
@@ -273,7 +314,9 @@ def simplify(robot: Robot, problem: Problem, path: np.ndarray, seed: int, shortc
             lo = hi
         out.append(path[lo])
         i = lo
-    short, _ = BiRRT(robot, seed=seed, shortcut_iters=shortcuts).shortcut(np.array(out), problem, np.random.default_rng(seed))
+    short, _ = BiRRT(robot, seed=seed, shortcut_iters=shortcuts).shortcut(
+        np.array(out), problem, np.random.default_rng(seed)
+    )
     return short
 
 
@@ -313,7 +356,8 @@ def plan(
         if not all(r.success for r in ends):
             info[f"sweep_{order}_ends"] = [bool(r.success) for r in ends]
             continue
-        raw = np.concatenate([ends[0].path, np.array(poses), ends[1].path])  # (Bi-RRT's paths end at pre and start at post)
+        # (Bi-RRT's paths end at pre and start at post)
+        raw = np.concatenate([ends[0].path, np.array(poses), ends[1].path])
         info["order"] = order
         info["sweep_poses"] = len(poses)
         t1 = time.perf_counter()

@@ -83,7 +83,9 @@ class SlotThreading:
     """The expert of one template (``(N, 7)`` poses in the reference slot, the first before
     the wall, the last past it)."""
 
-    def __init__(self, robot: Robot, template: np.ndarray, width_bars: float, max_nodes: int = 2000, copies: bool = False) -> None:
+    def __init__(
+        self, robot: Robot, template: np.ndarray, width_bars: float, max_nodes: int = 2000, copies: bool = False
+    ) -> None:
         template = np.asarray(template, np.float64)
         if template.ndim != 2 or template.shape[1] != robot.config_dim or len(template) < 2:
             raise ValueError(f"a template is (N >= 2, {robot.config_dim}) poses, not {template.shape}")
@@ -91,7 +93,9 @@ class SlotThreading:
         self.copies = bool(copies)
 
     @classmethod
-    def load(cls, robot: Robot, path: str | Path | None = None, max_nodes: int = 2000, copies: bool = False) -> SlotThreading:
+    def load(
+        cls, robot: Robot, path: str | Path | None = None, max_nodes: int = 2000, copies: bool = False
+    ) -> SlotThreading:
         """The template in ``path`` (``np.savez`` with ``poses`` and ``width_bars``), by
         default the one shipped in the package."""
         if path is None:
@@ -125,7 +129,12 @@ class SlotThreading:
         if q[0] <= placed[0][0, 0]:
             cost = [float(_turn_angle(q[3:], t[0, 3:])) for t in placed]
         else:
-            cost = [float(np.min(np.linalg.norm(t[:, :3] - q[:3], axis=1) / METRES_PER_RADIAN + _turn_angle(q[3:], t[:, 3:]))) for t in placed]
+            cost = [
+                float(
+                    np.min(np.linalg.norm(t[:, :3] - q[:3], axis=1) / METRES_PER_RADIAN + _turn_angle(q[3:], t[:, 3:]))
+                )
+                for t in placed
+            ]
         return placed[int(np.argmin(cost))]
 
     def _connect(self, problem: Problem, a: np.ndarray, b: np.ndarray, seed: int) -> np.ndarray | None:
@@ -206,7 +215,9 @@ def template_candidates(
         for order in orders:
             poses = sweep(robot, problem, order, ds, rng, log, min_clearance, guide)
             if log is not None:
-                log(f"try {attempt}, led by {order}: {'found' if poses is not None else 'stuck'} ({time.perf_counter() - t0:.0f} s)")
+                log(
+                    f"try {attempt}, led by {order}: {'found' if poses is not None else 'stuck'} ({time.perf_counter() - t0:.0f} s)"
+                )
             if poses is None:
                 continue
             raw = np.array(poses)
@@ -218,8 +229,17 @@ def template_candidates(
             yield order, np.concatenate([first[None], path, last[None]])
 
 
-def save_template(path: str | Path, poses: np.ndarray, width_bars: float, order: str, seed: int, clearance: float) -> None:
+def save_template(
+    path: str | Path, poses: np.ndarray, width_bars: float, order: str, seed: int, clearance: float
+) -> None:
     """Write a template as :meth:`SlotThreading.load` reads it (``np.savez``: ``poses`` and
     ``width_bars``, with the leading bar, the seed and the certified clearance it was made
     with)."""
-    np.savez(path, poses=np.asarray(poses, np.float64), width_bars=float(width_bars), order=str(order), seed=int(seed), clearance=float(clearance))
+    np.savez(
+        path,
+        poses=np.asarray(poses, np.float64),
+        width_bars=float(width_bars),
+        order=str(order),
+        seed=int(seed),
+        clearance=float(clearance),
+    )

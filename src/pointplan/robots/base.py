@@ -72,6 +72,17 @@ class Robot(ABC):
     def sample_orientation(self, rng: np.random.Generator, n: int) -> Array:
         """``(n, config_dim - dim)`` orientation coordinates drawn uniformly."""
 
+    def planner_defaults(self, planner: str) -> dict[str, float]:
+        """Keyword defaults this robot gives a planner built by name (``make_planner``);
+        rigid robots keep the planners' own."""
+        return {}
+
+    @property
+    def euclidean(self) -> bool:
+        """Whether configurations form a flat space: the distance is the Euclidean norm of
+        their difference (positions only; an arm's joint space)."""
+        return self.config_dim == self.dim
+
     # -------------------------------------------------------------- derived operations
     def distance(self, q0: Array, q1: Array) -> Array:
         """Geodesic distance ``||log(q0^-1 q1)||``."""
@@ -180,7 +191,9 @@ class Robot(ABC):
             raise ValueError(f"margin must be >= 0, not {margin}")
         out = copy.copy(self)
         p = self.parts
-        out.parts = BodyParts(p.sphere_centers, p.sphere_radii + margin, p.box_centers, p.box_rotations, p.box_halfs + margin)
+        out.parts = BodyParts(
+            p.sphere_centers, p.sphere_radii + margin, p.box_centers, p.box_rotations, p.box_halfs + margin
+        )
         return out
 
     # -------------------------------------------------------------- certified motions
@@ -234,7 +247,9 @@ class Robot(ABC):
         if cached is None:
             p = self.parts
             signs = np.array(np.meshgrid(*[[-1.0, 1.0]] * self.dim, indexing="ij")).reshape(self.dim, -1).T
-            corners = p.box_centers[:, None, :] + np.einsum("pij,pkj->pki", p.box_rotations, signs * p.box_halfs[:, None, :])
+            corners = p.box_centers[:, None, :] + np.einsum(
+                "pij,pkj->pki", p.box_rotations, signs * p.box_halfs[:, None, :]
+            )
             basis = np.eye(self.twist_dim)
             rows = []
             for e in basis:  # the velocity of each corner for a unit twist along e

@@ -39,7 +39,9 @@ class Robot(Protocol):
 
     def grown_parts(self, seg: Array, reach: float) -> tuple[Array, Array]: ...
 
-    def collides(self, world: CollisionWorld, q: Array, radii: Array | None = None, halfs: Array | None = None) -> Bool: ...
+    def collides(
+        self, world: CollisionWorld, q: Array, radii: Array | None = None, halfs: Array | None = None
+    ) -> Bool: ...
 
     def integrate(self, q: Array, v: Array) -> Array: ...
 
@@ -87,7 +89,9 @@ def _sizes(robot: Robot, seg: Array, reach: float) -> tuple[Array, Array]:
     return (radii + CONTACT_MARGIN)[..., None, :], (halfs + CONTACT_MARGIN)[..., None, :, :]
 
 
-def _collides(robot: Robot, world: CollisionWorld, q: Array, radii: Array, halfs: Array, mask: Bool | None = None) -> Bool:
+def _collides(
+    robot: Robot, world: CollisionWorld, q: Array, radii: Array, halfs: Array, mask: Bool | None = None
+) -> Bool:
     """Collision of bodies of the given sizes at ``q: (..., J, cdim)``; with a single-scene
     world and a ``mask: (..., J)`` only the masked entries are computed."""
     if world.batch_shape != () or mask is None:
@@ -163,7 +167,13 @@ def check_motions(
 
 
 def segments_free(
-    robot: Robot, world: CollisionWorld, a: Array, b: Array, resolution: float, low: Array | None = None, high: Array | None = None
+    robot: Robot,
+    world: CollisionWorld,
+    a: Array,
+    b: Array,
+    resolution: float,
+    low: Array | None = None,
+    high: Array | None = None,
 ) -> tuple[Bool, Int]:
     """Are the geodesics ``a[e] -> b[e]`` (``(E, config_dim)`` each) certified free (and
     inside the bounds)? Each is sampled in ``intervals(length, resolution)`` sub-steps.

@@ -43,7 +43,9 @@ class Scenario(ABC):
         """Problem ``index`` of ``split``: workspace ``index``, start and goal drawn from
         ``(split, index, seed)``."""
         scene = self.scene(split, index)
-        rng = np.random.default_rng(np.random.SeedSequence([zlib.crc32(self.name.encode()), zlib.crc32(split.encode()), index, seed]))
+        rng = np.random.default_rng(
+            np.random.SeedSequence([zlib.crc32(self.name.encode()), zlib.crc32(split.encode()), index, seed])
+        )
         start, goal = self.sample_problem(scene, rng)
         return Problem(scene, start, goal, tag=f"{self.name}/{split}/{index}/seed{seed}")
 

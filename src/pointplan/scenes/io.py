@@ -38,7 +38,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry import lie
-from ..geometry.clouds import DEFAULT_K, POINT_FILE_SUFFIXES, CloudError, check_normals, depth_to_points, estimate_normals, read_depth_image, read_point_file
+from ..geometry.clouds import (
+    DEFAULT_K,
+    POINT_FILE_SUFFIXES,
+    CloudError,
+    check_normals,
+    depth_to_points,
+    estimate_normals,
+    read_depth_image,
+    read_point_file,
+)
 from ..geometry.shapes import Box, Capsule, Cylinder, Mesh, PointCloud, Shape, Sphere
 from ..robots.base import Robot
 from .base import FixedScenario
@@ -160,7 +169,12 @@ class _Reader:
         return float(value)
 
     def vector(self, value: Any, where: str, n: int, positive: bool = False, nonzero: bool = False) -> Array:
-        ok = isinstance(value, list) and len(value) == n and all(_is_number(x) for x in value) and (not positive or all(x > 0 for x in value))
+        ok = (
+            isinstance(value, list)
+            and len(value) == n
+            and all(_is_number(x) for x in value)
+            and (not positive or all(x > 0 for x in value))
+        )
         if not ok:
             adj = "positive numbers" if positive else "numbers"
             self.fail(where, f"expected {n} {adj}, got {_show(value)}")
@@ -180,7 +194,10 @@ class _Reader:
         if not path.is_absolute():
             path = self.base / path
         if suffixes is not None and path.suffix.lower() not in suffixes:
-            self.fail(where, f"unsupported file type {path.suffix or '(none)'!r} of {value!r}; use one of {', '.join(suffixes)}")
+            self.fail(
+                where,
+                f"unsupported file type {path.suffix or '(none)'!r} of {value!r}; use one of {', '.join(suffixes)}",
+            )
         if not path.is_file():
             self.fail(where, f"file not found: {value!r} (looked for {os.path.abspath(path)})")
         return path
@@ -205,7 +222,10 @@ class _Reader:
         low = self.vector(self.get(bounds, "low", "bounds"), "bounds.low", dim)
         high = self.vector(self.get(bounds, "high", "bounds"), "bounds.high", dim)
         if np.any(high <= low):
-            self.fail("bounds.high", f"must exceed bounds.low in every axis, got low {_show(low.tolist())}, high {_show(high.tolist())}")
+            self.fail(
+                "bounds.high",
+                f"must exceed bounds.low in every axis, got low {_show(low.tolist())}, high {_show(high.tolist())}",
+            )
 
         robot = doc.get("robot")
         if robot is not None:
@@ -277,7 +297,11 @@ class _Reader:
             scale = np.ones(3)
             if "scale" in entry:
                 s = entry["scale"]
-                scale = np.full(3, self.number(s, at("scale"), positive=True)) if not isinstance(s, list) else self.vector(s, at("scale"), 3, positive=True)
+                scale = (
+                    np.full(3, self.number(s, at("scale"), positive=True))
+                    if not isinstance(s, list)
+                    else self.vector(s, at("scale"), 3, positive=True)
+                )
             pos = self.vector(entry["position"], at("position"), 3) if "position" in entry else np.zeros(3)
             rot = self.quaternion(entry["quaternion"], at("quaternion")) if "quaternion" in entry else np.eye(3)
             vertices, faces = self.mesh_file(path, at("path"))
@@ -323,7 +347,10 @@ class _Reader:
         try:
             if normals is None:
                 if len(points) < dim + 1:
-                    self.fail(field_name, f"{name!r} holds {len(points)} points: too few to estimate normals (give normals in the file)")
+                    self.fail(
+                        field_name,
+                        f"{name!r} holds {len(points)} points: too few to estimate normals (give normals in the file)",
+                    )
                 normals = estimate_normals(points, k=k, viewpoint=viewpoint)
             else:
                 normals = check_normals(normals, name)
@@ -331,15 +358,22 @@ class _Reader:
             self.fail(field_name, str(exc))
         return PointCloud(points=points, normals=normals, source=path)
 
-    def fit_dimension(self, points: Array, normals: Array | None, name: str, where: str, dim: int) -> tuple[Array, Array | None]:
+    def fit_dimension(
+        self, points: Array, normals: Array | None, name: str, where: str, dim: int
+    ) -> tuple[Array, Array | None]:
         """Points (and normals) with ``dim`` columns: a 2D scene takes flat 3D clouds (z = 0)."""
         c = points.shape[1]
         if c == dim:
             return points, normals
         if dim == 2 and c == 3:
             if np.any(points[:, 2] != 0.0):
-                self.fail(where, f"points file {name!r} holds 3D points (z is not 0 everywhere) but the scene is 2D; a 2D cloud has z = 0")
-            if normals is not None and np.any(np.abs(normals[:, 2]) > 1e-6 * np.maximum(np.linalg.norm(normals, axis=1), 1e-300)):
+                self.fail(
+                    where,
+                    f"points file {name!r} holds 3D points (z is not 0 everywhere) but the scene is 2D; a 2D cloud has z = 0",
+                )
+            if normals is not None and np.any(
+                np.abs(normals[:, 2]) > 1e-6 * np.maximum(np.linalg.norm(normals, axis=1), 1e-300)
+            ):
                 self.fail(where, f"points file {name!r}: normals of a 2D cloud must lie in the plane (normal z = 0)")
             return points[:, :2], None if normals is None else normals[:, :2]
         self.fail(where, f"points file {name!r} holds {c}D points but the scene is {dim}D")
@@ -349,8 +383,13 @@ class _Reader:
         at = lambda key: _join(where, key)
         intr = self.obj(self.get(entry, "intrinsics", where), at("intrinsics"))
         self.only(intr, ("fx", "fy", "cx", "cy"), at("intrinsics"), "intrinsics")
-        fx, fy = (self.number(self.get(intr, key, at("intrinsics")), _join(at("intrinsics"), key), positive=True) for key in ("fx", "fy"))
-        cx, cy = (self.number(self.get(intr, key, at("intrinsics")), _join(at("intrinsics"), key)) for key in ("cx", "cy"))
+        fx, fy = (
+            self.number(self.get(intr, key, at("intrinsics")), _join(at("intrinsics"), key), positive=True)
+            for key in ("fx", "fy")
+        )
+        cx, cy = (
+            self.number(self.get(intr, key, at("intrinsics")), _join(at("intrinsics"), key)) for key in ("cx", "cy")
+        )
         pose = np.eye(4)
         if "camera_pose" in entry:
             cam = self.obj(entry["camera_pose"], at("camera_pose"))
@@ -369,7 +408,9 @@ class _Reader:
             self.fail(at("depth"), str(exc))
         # every stride-th pixel, with the principal point moved to match
         depth = depth[::stride, ::stride]
-        points = depth_to_points(depth, fx / stride, fy / stride, cx / stride, cy / stride, pose=pose, depth_scale=scale)
+        points = depth_to_points(
+            depth, fx / stride, fy / stride, cx / stride, cy / stride, pose=pose, depth_scale=scale
+        )
         if len(points) == 0:
             self.fail(at("depth"), f"depth image {path.name!r} has no pixel with a positive depth")
         return points, pose[:3, 3].copy()
@@ -413,7 +454,9 @@ class _Reader:
                 if n_config is None:
                     if not (isinstance(value, list) and len(value) in allowed):
                         names = " or ".join(str(a) for a in allowed)
-                        self.fail(at, f"expected {names} numbers (a configuration of a {dim}D robot), got {_show(value)}")
+                        self.fail(
+                            at, f"expected {names} numbers (a configuration of a {dim}D robot), got {_show(value)}"
+                        )
                     n_config = len(value)
                 q[key] = self.configuration(self.vector(value, at, n_config), at, scene)
             out.append(Problem(scene=scene, start=q["start"], goal=q["goal"], tag=tag))
@@ -500,7 +543,11 @@ def load_points_scene(
     else:
         low, high = (np.asarray(b, np.float64).reshape(-1) for b in bounds)
         if low.shape != (dim,) or high.shape != (dim,) or np.any(high <= low):
-            raise SceneFormatError(name, "bounds", f"expected {dim} numbers low and high with low < high, got {low.tolist()} and {high.tolist()}")
+            raise SceneFormatError(
+                name,
+                "bounds",
+                f"expected {dim} numbers low and high with low < high, got {low.tolist()} and {high.tolist()}",
+            )
     return Scene(obstacles=[cloud], low=low, high=high, name=path.stem)
 
 
@@ -556,7 +603,9 @@ class EnclosedRegions:
 
             dist, near = cKDTree(self._points).query(pos[on_wall])
             for k, d, j in zip(on_wall, dist, near):
-                probe = self._points[j] + (pos[k] - self._points[j]) / max(d, 1e-12) * 1.5 * self.cell if d > 0 else pos[k]
+                probe = (
+                    self._points[j] + (pos[k] - self._points[j]) / max(d, 1e-12) * 1.5 * self.cell if d > 0 else pos[k]
+                )
                 cell = self._index(probe)
                 free = bool(np.all((probe >= self.low) & (probe <= self.high))) and not self.wall[cell[0], cell[1]]
                 out[k] = bool(self.enclosed[cell[0], cell[1]]) if free else self._nearest_free(pos[k], idx[k])
@@ -660,7 +709,12 @@ def _obstacle_doc(shape: Shape, index: int, json_path: Path, dim: int) -> dict[s
     if isinstance(shape, Capsule):
         return {"type": "capsule", "a": _floats(shape.a), "b": _floats(shape.b), "radius": float(shape.radius)}
     if isinstance(shape, Cylinder):
-        out = {"type": "cylinder", "center": _floats(shape.center), "radius": float(shape.radius), "length": float(shape.length)}
+        out = {
+            "type": "cylinder",
+            "center": _floats(shape.center),
+            "radius": float(shape.radius),
+            "length": float(shape.length),
+        }
         if not _is_rotation(shape.rotation):
             raise SceneFormatError(str(json_path), where, "cylinder rotation is not a proper rotation matrix")
         if not np.array_equal(shape.rotation, np.eye(3)):
@@ -683,7 +737,10 @@ def _dumps(value: Any, indent: int = 0) -> str:
     if isinstance(value, dict):
         if not value:
             return "{}"
-        flat = all(not isinstance(v, (dict, list)) or (isinstance(v, list) and all(not isinstance(x, (dict, list)) for x in v)) for v in value.values())
+        flat = all(
+            not isinstance(v, (dict, list)) or (isinstance(v, list) and all(not isinstance(x, (dict, list)) for x in v))
+            for v in value.values()
+        )
         if flat and indent >= 2:
             return "{" + ", ".join(f"{json.dumps(k)}: {_dumps(v)}" for k, v in value.items()) + "}"
         items = [f"{inner}{json.dumps(k)}: {_dumps(v, indent + 1)}" for k, v in value.items()]
@@ -701,7 +758,7 @@ def save_scene(
     path: str | os.PathLike[str],
     scene: Scene,
     problems: Sequence[Problem] = (),
-    robot: Any = None,
+    robot: str | Robot | None = None,
 ) -> None:
     """Write ``scene`` (and problems) as a scene file that :func:`load_scene` reads back.
 

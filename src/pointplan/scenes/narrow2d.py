@@ -66,10 +66,7 @@ def generate_scene(rng: np.random.Generator, config: Narrow2DConfig = Narrow2DCo
     x1 = rng.uniform(m, gx - t - m - g)
     x3 = rng.uniform(gx + m, 1.0 - m - g)
     # gap in the vertical wall: below or above the horizontal wall
-    if rng.random() < 0.5:
-        y2 = rng.uniform(m, gy - t - m - g)
-    else:
-        y2 = rng.uniform(gy + m, 1.0 - m - g)
+    y2 = rng.uniform(m, gy - t - m - g) if rng.random() < 0.5 else rng.uniform(gy + m, 1.0 - m - g)
     obstacles = _boxes_from_intervals(0, gy - t, gy, [(x1, x1 + g), (x3, x3 + g)])
     obstacles += _boxes_from_intervals(1, gx - t, gx, [(y2, y2 + g)])
     return Scene(obstacles=obstacles, low=np.zeros(2), high=np.ones(2), name="narrow2d")

@@ -64,18 +64,34 @@ class DynamicScene(Scene):
 
     dynamic = True
 
-    def __init__(self, obstacles: Sequence[Box], targets: Sequence[Box], low: Array, high: Array, period: int = 80, name: str = "") -> None:
+    def __init__(
+        self,
+        obstacles: Sequence[Box],
+        targets: Sequence[Box],
+        low: Array,
+        high: Array,
+        period: int = 80,
+        name: str = "",
+    ) -> None:
         super().__init__(obstacles, low, high, name)
         self.targets = list(targets)
         self.boxes = [b for b in self.obstacles if isinstance(b, Box)]
-        if len(self.targets) != len(self.obstacles) or len(self.boxes) != len(self.obstacles) or not all(isinstance(b, Box) for b in self.targets):
+        if (
+            len(self.targets) != len(self.obstacles)
+            or len(self.boxes) != len(self.obstacles)
+            or not all(isinstance(b, Box) for b in self.targets)
+        ):
             raise ValueError("a dynamic scene needs one target box per obstacle box")
         self.period = int(period)
         self._worlds: dict[int, CollisionWorld] = {}
         # relative rotations as rotation vectors, for the geodesic interpolation
         from ..geometry import lie
 
-        rel = np.stack([a.rotation.T @ b.rotation for a, b in zip(self.boxes, self.targets)]) if self.targets else np.zeros((0, 3, 3))
+        rel = (
+            np.stack([a.rotation.T @ b.rotation for a, b in zip(self.boxes, self.targets)])
+            if self.targets
+            else np.zeros((0, 3, 3))
+        )
         self._rel_rotvec = lie.so3_log(rel) if len(rel) else np.zeros((0, 3))
 
     def fraction(self, t: int | Array) -> Array:

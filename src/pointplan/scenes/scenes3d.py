@@ -65,7 +65,9 @@ class Scenario3D(Scenario):
         robot = robot if robot is not None else self.default_robot
         self.robot = make_robot(robot) if isinstance(robot, str) else robot
         if self.robot.dim != 3:
-            raise ValueError(f"{self.name} is a 3D scenario; robot {self.robot.name} is {self.robot.dim}D (use sphere3d or sshape)")
+            raise ValueError(
+                f"{self.name} is a 3D scenario; robot {self.robot.name} is {self.robot.dim}D (use sphere3d or sshape)"
+            )
         self.config = config or BoxesConfig()
         self._cache: OrderedDict[tuple[str, int], Scene] = OrderedDict()
 
@@ -137,7 +139,9 @@ class Synthetic3DScenario(Scenario3D):
     def build(self, rng: np.random.Generator, split: str) -> Scene:
         n, sizes, centers, rots = self._layout(rng)
         kinds = rng.integers(0, len(self.KINDS), n)
-        return Scene([synthetic_shape(self.KINDS[k], sizes[i], centers[i], rots[i]) for i, k in enumerate(kinds)], LOW, HIGH)
+        return Scene(
+            [synthetic_shape(self.KINDS[k], sizes[i], centers[i], rots[i]) for i, k in enumerate(kinds)], LOW, HIGH
+        )
 
 
 class YCB3DScenario(Scenario3D):
@@ -151,7 +155,11 @@ class YCB3DScenario(Scenario3D):
     name = "ycb3d"
 
     def __init__(
-        self, robot: str | Robot | None = None, config: BoxesConfig | None = None, objects: dict[str, str | Path] | None = None, max_faces: int = 800
+        self,
+        robot: str | Robot | None = None,
+        config: BoxesConfig | None = None,
+        objects: dict[str, str | Path] | None = None,
+        max_faces: int = 800,
     ) -> None:
         super().__init__(robot, config)
         from . import ycb

@@ -19,10 +19,14 @@ import functools
 import importlib.util
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..geometry.shapes import Mesh
+
+if TYPE_CHECKING:
+    import trimesh
 
 log = logging.getLogger(__name__)
 
@@ -108,12 +112,16 @@ def default_ycb_objects() -> dict[str, Path]:
     """
     tried = []
     for what, folder, suffix in _bundled_sources():
-        found = {name: folder / f"{name}{suffix}" for name in DEFAULT_YCB_OBJECTS if (folder / f"{name}{suffix}").is_file()}
+        found = {
+            name: folder / f"{name}{suffix}" for name in DEFAULT_YCB_OBJECTS if (folder / f"{name}{suffix}").is_file()
+        }
         if found:
             return found
         tried.append(f"{what} ({folder})")
     raise FileNotFoundError(
-        "no bundled YCB meshes found; looked in " + "; ".join(tried) + ". Pass find_ycb_objects('<your YCB download>') instead (see docs/guide/scenarios.md)"
+        "no bundled YCB meshes found; looked in "
+        + "; ".join(tried)
+        + ". Pass find_ycb_objects('<your YCB download>') instead (see docs/guide/scenarios.md)"
     )
 
 
@@ -147,7 +155,7 @@ def _load_cached(path: str, max_faces: int) -> Mesh:
     if not src.is_file():
         raise FileNotFoundError(f"mesh file {path!r} does not exist")
     if src.suffix.lower() == ".msh":
-        tm = _read_mujoco_msh(src)
+        tm: trimesh.parent.Geometry = _read_mujoco_msh(src)
     else:
         try:
             tm = trimesh.load(path, force="mesh", process=False)
@@ -186,7 +194,7 @@ def place_mesh(mesh: Mesh, rotation: np.ndarray, translation: np.ndarray, scale:
 # --------------------------------------------------------------------------- internals
 
 
-def _read_mujoco_msh(path: Path):
+def _read_mujoco_msh(path: Path) -> trimesh.Trimesh:
     """MuJoCo's legacy binary mesh: int32 counts (vertices, normals, texcoords, faces), then
     float32 vertices (3 each), normals (3), texcoords (2) and int32 faces (3)."""
     import trimesh
@@ -205,7 +213,7 @@ def _read_mujoco_msh(path: Path):
     return trimesh.Trimesh(vertices.astype(np.float64), faces.astype(np.int64), process=False)
 
 
-def _clean(tm):
+def _clean(tm: trimesh.Trimesh) -> trimesh.Trimesh:
     """Merge duplicate vertices, drop degenerate and repeated faces and unused vertices."""
     import trimesh
 
@@ -216,7 +224,7 @@ def _clean(tm):
     return tm
 
 
-def _edge_use(tm) -> np.ndarray:
+def _edge_use(tm: trimesh.Trimesh) -> np.ndarray:
     """``(F, 3)``: how many faces share each edge of each face."""
     import trimesh
 
@@ -224,7 +232,7 @@ def _edge_use(tm) -> np.ndarray:
     return np.bincount(inverse)[inverse].reshape(-1, 3)
 
 
-def _repair(tm, rounds: int = 6):
+def _repair(tm: trimesh.Trimesh, rounds: int = 6) -> trimesh.Trimesh:
     """Try to close ``tm``: drop faces on non-manifold edges and dangling faces, fill holes;
     keep the largest piece; orient the faces outwards."""
     import trimesh
@@ -253,7 +261,7 @@ def _repair(tm, rounds: int = 6):
     return tm
 
 
-def _is_solid(tm, max_faces: int, like) -> bool:
+def _is_solid(tm: trimesh.Trimesh, max_faces: int, like: trimesh.Trimesh) -> bool:
     """Closed, within budget, and still the object ``like`` (bounding box within 15%, and
     volume within 30% when ``like`` is a closed volume): repair may keep the wrong piece."""
     if not (4 <= len(tm.faces) <= max_faces and tm.is_watertight and tm.is_volume):
@@ -263,7 +271,7 @@ def _is_solid(tm, max_faces: int, like) -> bool:
     return not like.is_volume or abs(tm.volume / like.volume - 1.0) <= 0.3
 
 
-def _closed_within_budget(tm, max_faces: int, path: str):
+def _closed_within_budget(tm: trimesh.Trimesh, max_faces: int, path: str) -> trimesh.Trimesh:
     """Watertight, at most ``max_faces`` faces: repair, decimate, or the convex hull."""
     import trimesh
 
@@ -284,7 +292,12 @@ def _closed_within_budget(tm, max_faces: int, path: str):
             for fraction in (1.0, 0.9, 0.8, 0.7):
                 for aggression in (7, 3):
                     count = max(4, int(max_faces * fraction))
-                    vertices, faces = simplify(np.asarray(tm.vertices, np.float64), np.asarray(tm.faces, np.int32), target_count=count, agg=aggression)
+                    vertices, faces = simplify(
+                        np.asarray(tm.vertices, np.float64),
+                        np.asarray(tm.faces, np.int32),
+                        target_count=count,
+                        agg=aggression,
+                    )
                     small = _repair(trimesh.Trimesh(vertices, faces, process=False))
                     if _is_solid(small, max_faces, tm):
                         return small
@@ -292,7 +305,7 @@ def _closed_within_budget(tm, max_faces: int, path: str):
     return _hull_within_budget(tm, max_faces)
 
 
-def _hull_within_budget(tm, max_faces: int):
+def _hull_within_budget(tm: trimesh.Trimesh, max_faces: int) -> trimesh.Trimesh:
     """Convex hull with at most ``max_faces`` faces: a hull of ``V`` points has at most
     ``2 V - 4`` faces, so hull a subset of at most ``max_faces / 2 + 2`` hull vertices."""
     import trimesh

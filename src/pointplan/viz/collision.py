@@ -64,7 +64,10 @@ def render_collision_errors(
         ax.set_xticks([])
         ax.set_yticks([])
         grid_acc = float(1.0 - wrong.mean())
-        ax.set_title(f"{TITLES.get(name, name)}\ngrid: {int(wrong.sum())} wrong of {len(q)} ({100 * grid_acc:.1f}% right)", fontsize=8)
+        ax.set_title(
+            f"{TITLES.get(name, name)}\ngrid: {int(wrong.sum())} wrong of {len(q)} ({100 * grid_acc:.1f}% right)",
+            fontsize=8,
+        )
         if j == 0:
             ax.legend(loc="lower left", fontsize=6, framealpha=0.9, markerscale=1.5)
         out[name] = {"grid_accuracy": grid_acc, "grid_wrong": int(wrong.sum()), "grid_points": int(len(q))}

@@ -116,20 +116,52 @@ def robot_label(robot: Robot) -> str:
     return robot.name
 
 
-def _robot_patches(ax: Axes, robot: Robot | None, q: Array, color: str, label: str, zorder: float = 6, body_label: str = "_nolegend_") -> None:
+def _robot_patches(
+    ax: Axes, robot: Robot | None, q: Array, color: str, label: str, zorder: float = 6, body_label: str = "_nolegend_"
+) -> None:
     """The robot's body at ``q`` at true size, outlined on top of a small marker at its
     centre (which keeps a tiny robot visible without hiding its size)."""
     q = np.asarray(q, np.float64)
-    ax.plot(q[0], q[1], "o", ms=6 if robot is None else 3.5, mfc=color, mec="black", mew=0.8 if robot is None else 0.4, zorder=zorder, label=label)
+    ax.plot(
+        q[0],
+        q[1],
+        "o",
+        ms=6 if robot is None else 3.5,
+        mfc=color,
+        mec="black",
+        mew=0.8 if robot is None else 0.4,
+        zorder=zorder,
+        label=label,
+    )
     if robot is None:
         return
     sc, bc, br, bh = robot.world_parts(q[None])
     for c, r in zip(sc[0], robot.parts.sphere_radii):
-        ax.add_patch(Circle(tuple(c[:2]), float(r), fc=(*to_rgb(color), 0.35), ec="black", lw=0.8, zorder=zorder + 1, label=body_label))
+        ax.add_patch(
+            Circle(
+                tuple(c[:2]),
+                float(r),
+                fc=(*to_rgb(color), 0.35),
+                ec="black",
+                lw=0.8,
+                zorder=zorder + 1,
+                label=body_label,
+            )
+        )
         body_label = "_nolegend_"
     for c, rot, h in zip(bc[0], br[0], bh[0]):
         box = Box(center=c[:2], size=2 * h[:2], rotation=rot[:2, :2])
-        ax.add_patch(Polygon(_box_corners(box), closed=True, fc=(*to_rgb(color), 0.35), ec="black", lw=0.8, zorder=zorder + 1, label=body_label))
+        ax.add_patch(
+            Polygon(
+                _box_corners(box),
+                closed=True,
+                fc=(*to_rgb(color), 0.35),
+                ec="black",
+                lw=0.8,
+                zorder=zorder + 1,
+                label=body_label,
+            )
+        )
         body_label = "_nolegend_"
 
 
@@ -225,6 +257,44 @@ def _draw_paths(ax: Axes, raw: Any, final: Array | None) -> None:
         ax.plot(final[:, 0], final[:, 1], "o", ms=3.5, mfc="white", mec=C_PATH, mew=1.0, zorder=5, label="_nolegend_")
 
 
+def _draw_endpoints(ax: Axes, problem: Problem, robot: Robot | None, goal_tolerance: float) -> None:
+    """The start (with the robot's body) and the goal (its body, or a dot, and the dashed
+    circle of the goal tolerance), with a legend entry for the goal."""
+    ax.add_patch(
+        Circle(
+            tuple(problem.goal[:2]),
+            goal_tolerance,
+            fill=False,
+            ec=C_GOAL,
+            lw=1.0,
+            ls="--",
+            zorder=6,
+            label="_nolegend_",
+        )
+    )
+    body = robot_label(robot) if robot is not None else "_nolegend_"
+    _robot_patches(ax, robot, problem.start, C_START, "start", body_label=body)
+    if robot is not None and robot.config_dim == robot.dim:
+        _robot_patches(ax, robot, problem.goal, C_GOAL, "_nolegend_")
+    else:
+        ax.plot(
+            problem.goal[0], problem.goal[1], "o", ms=6, mfc=C_GOAL, mec="black", mew=0.8, zorder=7, label="_nolegend_"
+        )
+    ax.plot(
+        [],
+        [],
+        "o",
+        ms=6,
+        mfc=C_GOAL,
+        mec="black",
+        mew=0.8,
+        ls="--",
+        color=C_GOAL,
+        lw=1.0,
+        label=f"goal (tol. {goal_tolerance:g})",
+    )
+
+
 def draw_problem(
     ax: Axes,
     problem: Problem,
@@ -253,7 +323,11 @@ def draw_problem(
     low, high = scene.low, scene.high
 
     # bounds (drawn unclipped so that the whole frame line shows at the axes limits)
-    ax.add_patch(Rectangle(tuple(low), *(high - low), fill=False, ec=C_BOUNDS, lw=1.5, zorder=8, clip_on=False, label="_nolegend_"))
+    ax.add_patch(
+        Rectangle(
+            tuple(low), *(high - low), fill=False, ec=C_BOUNDS, lw=1.5, zorder=8, clip_on=False, label="_nolegend_"
+        )
+    )
     _draw_obstacles(ax, scene)
 
     if show_trees and result is not None:
@@ -265,14 +339,7 @@ def draw_problem(
     _draw_paths(ax, getattr(result, "raw_path", None) if result is not None else None, _path_of(result, path))
 
     # start and goal on top
-    ax.add_patch(Circle(tuple(problem.goal[:2]), goal_tolerance, fill=False, ec=C_GOAL, lw=1.0, ls="--", zorder=6, label="_nolegend_"))
-    body = robot_label(robot) if robot is not None else "_nolegend_"
-    _robot_patches(ax, robot, problem.start, C_START, "start", body_label=body)
-    if robot is not None and robot.config_dim == robot.dim:
-        _robot_patches(ax, robot, problem.goal, C_GOAL, "_nolegend_")
-    else:
-        ax.plot(problem.goal[0], problem.goal[1], "o", ms=6, mfc=C_GOAL, mec="black", mew=0.8, zorder=7, label="_nolegend_")
-    ax.plot([], [], "o", ms=6, mfc=C_GOAL, mec="black", mew=0.8, ls="--", color=C_GOAL, lw=1.0, label=f"goal (tol. {goal_tolerance:g})")
+    _draw_endpoints(ax, problem, robot, goal_tolerance)
 
     ax.set_xlim(low[0], high[0])
     ax.set_ylim(low[1], high[1])
@@ -339,7 +406,15 @@ def _draw_occupancy(ax: Axes, obs: np.ndarray, robot: Robot) -> None:
 
     img = np.asarray(obs).reshape(obs.shape[-2], obs.shape[-1])
     extent = OccupancyImage(robot).extent
-    ax.imshow(img.T, origin="lower", cmap="Greys", vmin=0.0, vmax=1.5, extent=(-extent, extent, -extent, extent), interpolation="nearest")
+    ax.imshow(
+        img.T,
+        origin="lower",
+        cmap="Greys",
+        vmin=0.0,
+        vmax=1.5,
+        extent=(-extent, extent, -extent, extent),
+        interpolation="nearest",
+    )
     ax.plot(0.0, 0.0, "o", ms=6, mfc=C_START, mec="black", mew=0.8)
     ax.set_title(f"occupancy image {img.shape[0]}\u00d7{img.shape[1]} (robot frame)", fontsize=9)
     ax.set_xlabel("x \u2212 x$_{robot}$", fontsize=8)
@@ -419,7 +494,12 @@ def render_grid(
                     )
                 legend[key] = h
     fig.legend(
-        list(legend.values()), list(legend.keys()), loc="outside lower center", ncols=min(len(legend), _legend_columns(ncols)), fontsize=8, frameon=False
+        list(legend.values()),
+        list(legend.keys()),
+        loc="outside lower center",
+        ncols=min(len(legend), _legend_columns(ncols)),
+        fontsize=8,
+        frameon=False,
     )
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)

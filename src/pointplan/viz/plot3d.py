@@ -91,7 +91,9 @@ def _bounds_3d(low: Any, high: Any) -> tuple[Array, Array]:
 
 def _require_3d_problem(problem: Problem, robot: Robot) -> None:
     if problem.scene.dim != 3:
-        raise ValueError(f"the 3D drawings need a 3D scene, this one is {problem.scene.dim}D (use pointplan.viz.plot2d)")
+        raise ValueError(
+            f"the 3D drawings need a 3D scene, this one is {problem.scene.dim}D (use pointplan.viz.plot2d)"
+        )
     _require_3d_robot(robot)
 
 
@@ -125,7 +127,9 @@ def _box_faces(center: Array, rotation: Array, half: Array) -> Array:
     return corners[idx]
 
 
-def _revolution(radii: Sequence[float] | Array, zs: Sequence[float] | Array, center: Array, rotation: Array, n: int = N_AROUND) -> Array:
+def _revolution(
+    radii: Sequence[float] | Array, zs: Sequence[float] | Array, center: Array, rotation: Array, n: int = N_AROUND
+) -> Array:
     """Quads ``(F, 4, 3)`` of the surface swept by the profile ``(radius, z)`` (rows, in
     order) around the local z axis, placed in the world by ``rotation`` and ``center``.
     A row of radius 0 collapses to a point (caps, apexes and poles)."""
@@ -247,8 +251,12 @@ def _shade(color: Any, normals: Array, alpha: float) -> Array:
     return out
 
 
-def _polys(ax: Axes3D, faces: Array, facecolors: Array, edgecolors: Array, lw: float, zorder: float, gid: str, label: str) -> Poly3DCollection:
-    coll = Poly3DCollection(faces, facecolors=facecolors, edgecolors=edgecolors, linewidths=lw, zorder=zorder, label=label)
+def _polys(
+    ax: Axes3D, faces: Array, facecolors: Array, edgecolors: Array, lw: float, zorder: float, gid: str, label: str
+) -> Poly3DCollection:
+    coll = Poly3DCollection(
+        faces, facecolors=facecolors, edgecolors=edgecolors, linewidths=lw, zorder=zorder, label=label
+    )
     coll.set_gid(gid)
     ax.add_collection3d(coll)
     return coll
@@ -292,7 +300,11 @@ def _draw_obstacles(ax: Axes3D, obstacles: Sequence[Shape], alpha: float) -> lis
             if s.dim != 3:
                 raise ValueError(f"the 3D drawings need 3D shapes, got a {s.dim}D PointCloud")
             p = s.points
-            artists.append(ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=3, c=C_OBSTACLE_EDGE, lw=0, depthshade=False, zorder=_Z["obstacles"]))
+            artists.append(
+                ax.scatter(
+                    p[:, 0], p[:, 1], p[:, 2], s=3, c=C_OBSTACLE_EDGE, lw=0, depthshade=False, zorder=_Z["obstacles"]
+                )
+            )
             continue
         f, n, edges = _shape_faces(s)
         faces.append(f)
@@ -300,7 +312,18 @@ def _draw_obstacles(ax: Axes3D, obstacles: Sequence[Shape], alpha: float) -> lis
         e = np.broadcast_to(edge_rgba if edges else np.zeros(4), (len(f), 4))
         ecs.append(e)
     if faces:
-        artists.append(_polys(ax, np.concatenate(faces), np.concatenate(fcs), np.concatenate(ecs), 0.5, _Z["obstacles"], GID_OBSTACLES, "obstacles"))
+        artists.append(
+            _polys(
+                ax,
+                np.concatenate(faces),
+                np.concatenate(fcs),
+                np.concatenate(ecs),
+                0.5,
+                _Z["obstacles"],
+                GID_OBSTACLES,
+                "obstacles",
+            )
+        )
     return artists
 
 
@@ -327,7 +350,14 @@ def _robot_faces(robot: Robot, q: Array) -> tuple[Array, Array, Array]:
 
 
 def _draw_robot(
-    ax: Axes3D, robot: Robot, q: Array, color: Any, alpha: float, zorder: float = _Z["robot"], edge: Any = "black", label: str = "_nolegend_"
+    ax: Axes3D,
+    robot: Robot,
+    q: Array,
+    color: Any,
+    alpha: float,
+    zorder: float = _Z["robot"],
+    edge: Any = "black",
+    label: str = "_nolegend_",
 ) -> Poly3DCollection:
     faces, normals, boxy = _robot_faces(robot, q)
     fc = _shade(color, normals, alpha)
@@ -349,24 +379,44 @@ def _draw_points(ax: Axes3D, points: Array, normals: Array | None, low: Array, h
         ax.add_collection3d(lines)
         out.append(lines)
     out.append(
-        ax.scatter(points[:, 0], points[:, 1], points[:, 2], s=7, c=C_POINTS, edgecolors="#8a4a0b", linewidths=0.3, depthshade=False, zorder=_Z["points"])
+        ax.scatter(
+            points[:, 0],
+            points[:, 1],
+            points[:, 2],
+            s=7,
+            c=C_POINTS,
+            edgecolors="#8a4a0b",
+            linewidths=0.3,
+            depthshade=False,
+            zorder=_Z["points"],
+        )
     )
     return out
 
 
-def _draw_path(ax: Axes3D, robot: Robot, path: Array, ghosts: int = N_GHOSTS, upto: int | None = None, floor: float | None = None) -> list[Any]:
+def _draw_path(
+    ax: Axes3D, robot: Robot, path: Array, ghosts: int = N_GHOSTS, upto: int | None = None, floor: float | None = None
+) -> list[Any]:
     """Polyline of the robot's centres, its nodes as dots and ``ghosts`` faint robots;
     with ``floor``, its shadow on the plane ``z = floor``."""
     pos = robot.positions(path)
     out: list[Any] = []
     if floor is not None:  # the path's shadow on the floor, a depth cue
-        out += ax.plot(pos[:, 0], pos[:, 1], np.full(len(pos), floor), "-", color="0.55", lw=1.0, alpha=0.6, zorder=_Z["bounds"])
+        out += ax.plot(
+            pos[:, 0], pos[:, 1], np.full(len(pos), floor), "-", color="0.55", lw=1.0, alpha=0.6, zorder=_Z["bounds"]
+        )
     if upto is None:
-        out += ax.plot(pos[:, 0], pos[:, 1], pos[:, 2], "-", color=C_PATH, lw=2.0, zorder=_Z["path"], solid_capstyle="round")
-        out += ax.plot(pos[:, 0], pos[:, 1], pos[:, 2], "o", ms=2.5, mfc="white", mec=C_PATH, mew=0.8, zorder=_Z["path"])
+        out += ax.plot(
+            pos[:, 0], pos[:, 1], pos[:, 2], "-", color=C_PATH, lw=2.0, zorder=_Z["path"], solid_capstyle="round"
+        )
+        out += ax.plot(
+            pos[:, 0], pos[:, 1], pos[:, 2], "o", ms=2.5, mfc="white", mec=C_PATH, mew=0.8, zorder=_Z["path"]
+        )
     else:  # a rollout frame: travelled part solid, the rest faint
         out += ax.plot(pos[:, 0], pos[:, 1], pos[:, 2], "--", color=C_PATH, lw=1.0, alpha=0.5, zorder=_Z["path"])
-        out += ax.plot(pos[: upto + 1, 0], pos[: upto + 1, 1], pos[: upto + 1, 2], "-", color=C_PATH, lw=2.0, zorder=_Z["path"])
+        out += ax.plot(
+            pos[: upto + 1, 0], pos[: upto + 1, 1], pos[: upto + 1, 2], "-", color=C_PATH, lw=2.0, zorder=_Z["path"]
+        )
     if ghosts > 0 and len(path) > 2:
         idx = np.unique(np.linspace(0, len(path) - 1, ghosts + 2).round().astype(int))
         idx = idx[(idx > 0) & (idx < len(path) - 1)]  # start and goal are drawn apart
@@ -411,9 +461,13 @@ def _draw_endpoints(ax: Axes3D, robot: Robot, start: Array | None, goal: Array |
 def _legend_handles(points: bool, path: bool, start: str = "start", robot: Robot | None = None) -> list[Any]:
     h: list[Any] = [Patch(fc=C_OBSTACLE, ec=C_OBSTACLE_EDGE, alpha=0.6, label="obstacles")]
     if robot is not None:
-        h.append(Line2D([], [], ls="none", marker="o", ms=7, mfc="none", mec="black", mew=0.8, label=robot_label(robot)))
+        h.append(
+            Line2D([], [], ls="none", marker="o", ms=7, mfc="none", mec="black", mew=0.8, label=robot_label(robot))
+        )
     if points:
-        h.append(Line2D([], [], ls="none", marker="o", ms=4, mfc=C_POINTS, mec="#8a4a0b", mew=0.3, label="observed points"))
+        h.append(
+            Line2D([], [], ls="none", marker="o", ms=4, mfc=C_POINTS, mec="#8a4a0b", mew=0.3, label="observed points")
+        )
     h.append(Line2D([], [], ls="none", marker="o", ms=6, mfc=C_START, mec="black", mew=0.7, label=start))
     h.append(Line2D([], [], ls="none", marker="o", ms=6, mfc=C_GOAL, mec="black", mew=0.7, label="goal"))
     if path:
@@ -556,7 +610,9 @@ def render_grid_3d(
         title = titles[i] if titles is not None else (_title_of(pr) or f"problem {i}")
         _draw_problem(ax, pr, robot, p, None, None, title, None, 25, azim, fontsize=8)
         ax.set_box_aspect(tuple(pr.scene.high - pr.scene.low), zoom=1.0)  # room for the tick labels
-    fig.legend(handles=_legend_handles(False, any_path, robot=robot), loc="lower center", ncols=5, fontsize=8, frameon=False)
+    fig.legend(
+        handles=_legend_handles(False, any_path, robot=robot), loc="lower center", ncols=5, fontsize=8, frameon=False
+    )
     _save(fig, output)
     return fig
 
@@ -589,7 +645,14 @@ def render_rollout_gif(
     draw_scene_3d(ax, [] if obstacles_at is not None else scene.obstacles, low, high)
     ax.view_init(elev=elev, azim=azim)
     _draw_endpoints(ax, robot, None, problem.goal)
-    fig.legend(handles=_legend_handles(points_at is not None, True, "robot"), loc="lower center", ncols=5, fontsize=7, frameon=False, handlelength=1.5)
+    fig.legend(
+        handles=_legend_handles(points_at is not None, True, "robot"),
+        loc="lower center",
+        ncols=5,
+        fontsize=7,
+        frameon=False,
+        handlelength=1.5,
+    )
     name = _title_of(problem)
     out = Path(output)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -609,7 +672,9 @@ def render_rollout_gif(
             moving += _draw_path(ax, robot, p, ghosts=0, upto=t, floor=float(low[2]))
             moving.append(_draw_robot(ax, robot, q, C_START, 0.9))
             pos = robot.positions(q)
-            moving += ax.plot([pos[0]], [pos[1]], [pos[2]], "o", ms=4, mfc=C_START, mec="black", mew=0.6, zorder=_Z["marker"])
+            moving += ax.plot(
+                [pos[0]], [pos[1]], [pos[2]], "o", ms=4, mfc=C_START, mec="black", mew=0.6, zorder=_Z["marker"]
+            )
             # the step counter also keeps every frame distinct (GIF writers merge equal frames)
             ax.set_title(f"{name}   t = {t}/{len(p) - 1}" if name else f"t = {t}/{len(p) - 1}", fontsize=8, pad=0)
             writer.grab_frame()

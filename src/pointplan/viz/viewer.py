@@ -220,7 +220,9 @@ def _obstacle_drawer(server: Any, handles: dict[str, Any]) -> Callable[[Sequence
     def draw_obstacles(obstacles: Sequence[Shape]) -> None:
         meshes = scene_meshes(obstacles)
         old = handles["obstacles"]
-        same = len(old) == len(meshes) and all(np.array_equal(f, m.faces) for f, m in zip(handles["obstacle_faces"], meshes))
+        same = len(old) == len(meshes) and all(
+            np.array_equal(f, m.faces) for f, m in zip(handles["obstacle_faces"], meshes)
+        )
         if same:
             for h, m in zip(old, meshes):
                 h.vertices = np.asarray(m.vertices, np.float32)
@@ -250,7 +252,14 @@ def _add_body(server: Any, robot: Robot, name: str, q: Array, color: str, opacit
     body = robot_mesh(robot)
     pos, wxyz = robot_pose(robot, q)
     frame = server.scene.add_frame(name, show_axes=False, position=pos, wxyz=wxyz)
-    server.scene.add_mesh_simple(f"{name}/body", np.asarray(body.vertices), np.asarray(body.faces), color=_rgb255(color), opacity=opacity, flat_shading=True)
+    server.scene.add_mesh_simple(
+        f"{name}/body",
+        np.asarray(body.vertices),
+        np.asarray(body.faces),
+        color=_rgb255(color),
+        opacity=opacity,
+        flat_shading=True,
+    )
     return frame
 
 
@@ -263,7 +272,9 @@ def _fill_scene(server: Any, problem: Problem, robot: Robot, timed: Array) -> di
     centre = (low + high) / 2.0
     server.initial_camera.look_at = tuple(centre)
     server.initial_camera.position = tuple(centre + np.array([-1.2, -1.6, 1.1]) * extent)
-    server.scene.add_line_segments("/bounds", _bounds_segments(low, high), _rgb255(C_BOUNDS), thickness=1.5, thickness_units="screen")
+    server.scene.add_line_segments(
+        "/bounds", _bounds_segments(low, high), _rgb255(C_BOUNDS), thickness=1.5, thickness_units="screen"
+    )
     handles: dict[str, Any] = {"obstacles": [], "obstacle_faces": []}
     handles["draw_obstacles"] = draw_obstacles = _obstacle_drawer(server, handles)
     draw_obstacles(scene.obstacles_at(0))
@@ -271,29 +282,51 @@ def _fill_scene(server: Any, problem: Problem, robot: Robot, timed: Array) -> di
     for k, s in enumerate(clouds):
         if s.dim == 3 and len(s.points):
             server.scene.add_point_cloud(
-                f"/obstacle_points/{k}", np.asarray(s.points), _rgb255(C_OBSTACLE_EDGE), point_size=0.006 * extent, precision="float32"
+                f"/obstacle_points/{k}",
+                np.asarray(s.points),
+                _rgb255(C_OBSTACLE_EDGE),
+                point_size=0.006 * extent,
+                precision="float32",
             )
     _add_body(server, robot, "/start", problem.start, C_START, ENDPOINT_OPACITY)
     _add_body(server, robot, "/goal", problem.goal, C_GOAL, ENDPOINT_OPACITY)
     if len(timed) > 1:
         pos = robot.positions(timed)
-        server.scene.add_line_segments("/path", np.stack([pos[:-1], pos[1:]], 1), _rgb255(C_PATH), thickness=3.0, thickness_units="screen")
+        server.scene.add_line_segments(
+            "/path", np.stack([pos[:-1], pos[1:]], 1), _rgb255(C_PATH), thickness=3.0, thickness_units="screen"
+        )
     handles["robot"] = _add_body(server, robot, "/robot", timed[0], C_START, None)
     handles["points"] = server.scene.add_point_cloud(
-        "/points", np.zeros((1, 3)), _rgb255(C_POINTS), point_size=0.008 * extent, precision="float32", point_shape="circle", visible=False
+        "/points",
+        np.zeros((1, 3)),
+        _rgb255(C_POINTS),
+        point_size=0.008 * extent,
+        precision="float32",
+        point_shape="circle",
+        visible=False,
     )
     return handles
 
 
-def _add_controls(server: Any, problem: Problem, robot: Robot, timed: Array, handles: dict[str, Any], points_at: Callable[[int], Any] | None) -> dict[str, Any]:
+def _add_controls(
+    server: Any,
+    problem: Problem,
+    robot: Robot,
+    timed: Array,
+    handles: dict[str, Any],
+    points_at: Callable[[int], Any] | None,
+) -> dict[str, Any]:
     """The title, the time-step slider and the play box; the step shown follows the slider."""
     scene, n_steps = problem.scene, len(timed)
     robot_frame, points_handle = handles["robot"], handles["points"]
     title = problem.tag or scene.name or "problem"
     server.gui.add_markdown(
-        f"**{title}**  \n{robot.name}, {n_steps} time step{'s' if n_steps != 1 else ''}" + ("  \nmoving obstacles" if scene.dynamic else "")
+        f"**{title}**  \n{robot.name}, {n_steps} time step{'s' if n_steps != 1 else ''}"
+        + ("  \nmoving obstacles" if scene.dynamic else "")
     )
-    slider = server.gui.add_slider("time step", min=0, max=max(n_steps - 1, 0), step=1, initial_value=0, disabled=n_steps < 2)
+    slider = server.gui.add_slider(
+        "time step", min=0, max=max(n_steps - 1, 0), step=1, initial_value=0, disabled=n_steps < 2
+    )
     play = server.gui.add_checkbox("play", initial_value=False, disabled=n_steps < 2)
     lock = threading.Lock()
 

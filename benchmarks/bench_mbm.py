@@ -1,0 +1,126 @@
+"""Arms on MotionBenchMaker: Bi-RRT and OMPL's RRTConnect taking turns on the same problems.
+
+For an arm (``panda`` or ``ur5``), every problem of the chosen scenarios is planned by each
+planner in turn (the order rotates from problem to problem, so that a busy machine slows
+them alike), one thread, ``planner.plan(problem)``, both with pointplan's certified
+joint-space motion check. Every returned path is re-checked by the evaluator
+(:func:`pointplan.evaluation.check_path`: pinocchio and coal, conservative advancement,
+independent of the planners' check); only accepted paths count as solved. Problems whose
+start or goal collides for the arm's sphere model (conservative by construction) are
+listed and left out of the rates.
+
+One JSON line per problem goes to ``--out`` as it is measured (Ctrl-C keeps what was done);
+the summary per scenario is printed at the end (or from an existing file with ``--summary``).
+
+    python benchmarks/bench_mbm.py --arm panda --out mbm_panda.jsonl
+    python benchmarks/bench_mbm.py --summary mbm_panda.jsonl
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def run(args: argparse.Namespace) -> None:
+    from pointplan.evaluation import check_path
+    from pointplan.planners import make_planner
+    from pointplan.planners.base import path_length
+    from pointplan.scenes.mbm import SCENARIOS, load_problem, make_arm, problem_count
+
+    robot = make_arm(args.arm)
+    names = args.planners.split(",")
+    planners = {n: make_planner(n, robot, time_limit=args.time_limit) for n in names}
+    scenarios = SCENARIOS if args.scenarios == "all" else tuple(args.scenarios.split(","))
+    out = Path(args.out)
+    done = set()
+    if out.exists():  # resume: skip the problems already measured
+        done = {json.loads(line)["tag"] for line in out.read_text().splitlines() if line.strip()}
+    k = 0
+    with out.open("a") as f:
+        for scenario in scenarios:
+            count = min(problem_count(args.arm, scenario), args.problems or 10**9)
+            for i in range(1, count + 1):
+                p = load_problem(args.arm, scenario, i)
+                if p.tag in done:
+                    continue
+                row: dict[str, Any] = {"tag": p.tag, "scenario": scenario}
+                row["valid"] = not bool(robot.collides(p.scene.world, np.stack([p.start, p.goal])).any())
+                order = names[k % len(names) :] + names[: k % len(names)]
+                k += 1
+                for name in order if row["valid"] else []:
+                    gc.collect()
+                    t = time.perf_counter()
+                    res = planners[name].plan(p)
+                    dt = time.perf_counter() - t
+                    ok = bool(res.success) and bool(check_path(robot, p, res.path, tolerance=1e-6))
+                    row[name] = {
+                        "claimed": bool(res.success),
+                        "ok": ok,
+                        "time_s": dt,
+                        "checks": int(res.collision_checks),
+                        "nodes": int(res.nodes),
+                        "length": path_length(robot, res.path) if ok else None,
+                    }
+                f.write(json.dumps(row) + "\n")
+                f.flush()
+                print(p.tag, {n: (row[n]["ok"], round(row[n]["time_s"], 3)) for n in names if n in row}, flush=True)
+
+
+def summary(path: Path) -> None:
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    names = sorted({k for r in rows for k, v in r.items() if isinstance(v, dict)})
+    by: dict[str, list[dict[str, Any]]] = {}
+    for r in rows:
+        by.setdefault(r["scenario"], []).append(r)
+    by["all"] = rows
+    print("| scenario | problems (valid) | " + " | ".join(f"{n}: solved, median / mean s" for n in names) + " |")
+    print("|---|---|" + "---|" * len(names))
+    for sc, rs in by.items():
+        valid = [r for r in rs if r["valid"]]
+        cells = []
+        for n in names:
+            got = [r[n] for r in valid if n in r]
+            t = np.array([g["time_s"] for g in got])
+            solved = sum(g["ok"] for g in got)
+            cells.append(f"{solved}/{len(got)}, {np.median(t):.3f} / {t.mean():.3f}" if len(got) else "-")
+        print(f"| {sc} | {len(rs)} ({len(valid)}) | " + " | ".join(cells) + " |")
+    for n in names:
+        if "ompl:RRTConnect" in names and n != "ompl:RRTConnect":
+            both = [r for r in rows if r["valid"] and n in r and "ompl:RRTConnect" in r]
+            ratio = np.median([r[n]["time_s"] for r in both]) / np.median(
+                [r["ompl:RRTConnect"]["time_s"] for r in both]
+            )
+            print(f"{n}: median time / OMPL's median time = {ratio:.2f}")
+    bad = [r["tag"] for r in rows if not r["valid"]]
+    print(f"left out (start or goal collides for the sphere model): {len(bad)} {' '.join(bad)}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--arm", default="panda", help="panda or ur5 (default: %(default)s)")
+    ap.add_argument("--scenarios", default="all", help="comma-separated, or all (default)")
+    ap.add_argument("--problems", type=int, default=0, help="first N problems per scenario (default: all)")
+    ap.add_argument("--planners", default="birrt,ompl:RRTConnect", help="(default: %(default)s)")
+    ap.add_argument("--time-limit", type=float, default=30.0, help="seconds per query (default: %(default)s)")
+    ap.add_argument("--out", default="mbm.jsonl", help="one JSON line per problem, appended (default: %(default)s)")
+    ap.add_argument("--summary", help="print the summary of an existing output file and stop")
+    args = ap.parse_args()
+    if args.summary:
+        summary(Path(args.summary))
+        return
+    try:
+        run(args)
+    except KeyboardInterrupt:
+        print("interrupted: the problems measured so far are in", args.out)
+    summary(Path(args.out))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,50 @@
+"""Fixtures shared by the test modules.
+
+The package is imported inside the fixtures, not here: collecting the tests loads only
+what the test modules themselves import.
+"""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import pytest
+
+if TYPE_CHECKING:
+    from pointplan.scenes.scene import Problem
+
+
+@pytest.fixture(scope="session")
+def narrow2d_test_problems() -> Callable[[int], list[Problem]]:
+    """``narrow2d_test_problems(n)``: the first ``n`` 2D-Narrow test problems (seed 0), a
+    new list of new problems at each call (a module's fixture keeps its own)."""
+    from pointplan.scenes.scenarios import Narrow2DScenario
+
+    def build(n: int) -> list[Problem]:
+        return Narrow2DScenario().problems("test", n, seed=0)
+
+    return build
+
+
+@pytest.fixture(scope="module")
+def one_torch_thread() -> None:
+    """PyTorch on one thread in this process (small networks are faster so, and the results
+    do not depend on the machine's cores). Like the tests' own calls it replaces, it is not
+    undone afterwards."""
+    import torch
+
+    torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="session")
+def free_port() -> Callable[[], int]:
+    """``free_port()``: a TCP port on 127.0.0.1 that nothing listens on now."""
+
+    def pick() -> int:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            return int(s.getsockname()[1])
+
+    return pick

@@ -1,0 +1,231 @@
+"""Arms from a URDF: forward kinematics and collision against pinocchio and coal (an
+independent implementation), the speed bound behind certified joint-space motions, the
+MotionBenchMaker problems."""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pointplan.geometry.shapes import Box, Cylinder
+from pointplan.robots.arm import ArmRobot, load_arm
+from pointplan.robots.motion import check_motions, intervals
+from pointplan.scenes.mbm import ARMS, SCENARIOS, load_problem, load_problems, make_arm
+from pointplan.scenes.scene import Problem
+
+ARM_NAMES = tuple(ARMS)
+
+
+def _urdf(arm: str) -> tuple[str, str]:
+    d = resources.files("pointplan") / "data" / "robots" / arm
+    return str(d / ARMS[arm][0]), str(d)
+
+
+def _pinocchio(arm: str, problem: Problem | None = None, robot: ArmRobot | None = None) -> tuple[Any, Any]:
+    """pinocchio's model and collision geometry of ``arm``; with ``problem``, its obstacles
+    as coal shapes and every robot-obstacle pair plus ``robot``'s self-collision pairs."""
+    urdf, folder = _urdf(arm)
+    m = pin.buildModelFromUrdf(urdf)
+    g = pin.buildGeomFromUrdf(m, urdf, pin.GeometryType.COLLISION, package_dirs=[folder])
+    if problem is None:
+        return m, g
+    assert robot is not None
+    n_robot = len(g.geometryObjects)
+    for k, s in enumerate(problem.scene.obstacles):
+        assert isinstance(s, Box | Cylinder)
+        geom = coal.Box(*s.size) if isinstance(s, Box) else coal.Cylinder(s.radius, s.length)
+        g.addGeometryObject(pin.GeometryObject(f"obstacle{k}", 0, 0, pin.SE3(s.rotation, s.center), geom))
+        for i in range(n_robot):
+            g.addCollisionPair(pin.CollisionPair(i, n_robot + k))
+    for a, b in robot.model.self_pairs:
+        g.addCollisionPair(pin.CollisionPair(int(a), int(b)))
+    return m, g
+
+
+@pytest.mark.parametrize("arm", ARM_NAMES)
+def test_forward_kinematics_matches_pinocchio(arm: str) -> None:
+    """Every sphere centre at 10,000 random configurations, against pinocchio's placements."""
+    robot = make_arm(arm)
+    m, g = _pinocchio(arm)
+    d, gd = m.createData(), pin.GeometryData(g)
+    q = np.random.default_rng(0).uniform(robot.lower, robot.upper, (10_000, robot.config_dim))
+    ours = robot.sphere_centers(q)
+    ref = np.empty_like(ours)
+    for k, qk in enumerate(q):
+        pin.forwardKinematics(m, d, qk)
+        pin.updateGeometryPlacements(m, d, g, gd)
+        ref[k] = [gd.oMg[i].translation for i in range(len(g.geometryObjects))]
+    assert np.abs(ours - ref).max() < 1e-12
+    assert np.allclose(robot.model.sphere_radius, [o.geometry.radius for o in g.geometryObjects])
+
+
+@pytest.mark.parametrize("arm", ARM_NAMES)
+def test_collision_matches_pinocchio_and_coal(arm: str) -> None:
+    """Collision with the obstacles of each scenario and with itself, at 10,000 random
+    configurations per arm (1,430 per scenario), against pinocchio + coal on the same spheres
+    and pairs; both verdicts occur often."""
+    robot = make_arm(arm)
+    rng = np.random.default_rng(1)
+    hits = total = 0
+    for k, scenario in enumerate(SCENARIOS):
+        problem = load_problem(arm, scenario, 1 + 7 * k)
+        m, g = _pinocchio(arm, problem, robot)
+        d, gd = m.createData(), pin.GeometryData(g)
+        q = rng.uniform(robot.lower, robot.upper, (1430, robot.config_dim))
+        ref = np.array([pin.computeCollisions(m, d, g, gd, qk, True) for qk in q])
+        ours = robot.collides(problem.scene.world, q)
+        assert np.array_equal(ours, ref), (scenario, int((ours != ref).sum()))
+        hits, total = hits + int(ref.sum()), total + len(q)
+    assert total >= 10_000 and 0.1 < hits / total < 0.9
+
+
+@pytest.mark.parametrize("arm", ARM_NAMES)
+def test_self_collision_alone_matches_pinocchio(arm: str) -> None:
+    """With no obstacles: the self-collision verdict alone, pair by pair."""
+    robot = make_arm(arm)
+    m, g = _pinocchio(arm)
+    for a, b in robot.model.self_pairs:
+        g.addCollisionPair(pin.CollisionPair(int(a), int(b)))
+    d, gd = m.createData(), pin.GeometryData(g)
+    q = np.random.default_rng(2).uniform(robot.lower, robot.upper, (3000, robot.config_dim))
+    ref = np.array([pin.computeCollisions(m, d, g, gd, qk, True) for qk in q])
+    c = robot.sphere_centers(q)
+    ours = robot.self_collides(c, np.broadcast_to(robot.model.sphere_radius, c.shape[:-1]))
+    assert np.array_equal(ours, ref)
+    assert 0.05 < ref.mean() < 0.95
+
+
+@pytest.mark.parametrize("arm", ARM_NAMES)
+def test_speed_bound_holds_and_is_not_vacuous(arm: str) -> None:
+    """Finite differences: no sphere centre moves faster than ``W |dq|``, and the bound is
+    within a small factor of the true speed for some configurations."""
+    robot = make_arm(arm)
+    rng = np.random.default_rng(3)
+    q = rng.uniform(robot.lower, robot.upper, (2000, robot.config_dim))
+    dq = rng.normal(size=q.shape)
+    h = 1e-6
+    speed = np.linalg.norm(robot.sphere_centers(q + h * dq) - robot.sphere_centers(q - h * dq), axis=-1) / (2 * h)
+    bound = np.abs(dq) @ robot.model.speed_bound.T
+    assert np.all(speed <= bound * (1 + 1e-6) + 1e-9)
+    moving = bound > 0  # (spheres on the base never move)
+    assert np.all(speed[~moving] == 0) and np.max(speed[moving] / bound[moving]) > 0.7
+    # the distance between the spheres of a self-collision pair, by the joints between them
+    a, b = robot.model.self_pairs.T
+    c0, c1 = robot.sphere_centers(q - h * dq), robot.sphere_centers(q + h * dq)
+    rate = np.abs(np.linalg.norm(c1[:, a] - c1[:, b], axis=-1) - np.linalg.norm(c0[:, a] - c0[:, b], axis=-1)) / (2 * h)
+    pair_bound = np.abs(dq) @ robot.model.pair_speed_bound.T
+    assert np.all(rate <= pair_bound * (1 + 1e-6) + 1e-9)
+    assert np.max(rate / np.maximum(pair_bound, 1e-12)) > 0.5
+    assert np.mean(pair_bound) < 0.5 * np.mean(bound[:, a] + bound[:, b])  # far below the two spheres' own
+
+
+@pytest.mark.parametrize("arm", ARM_NAMES)
+@pytest.mark.parametrize("how", ["advancement", "grid"])
+def test_certified_segments_are_free_when_sampled_densely(arm: str, how: str) -> None:
+    """Joint-space segments certified by the arm's motion check (conservative advancement,
+    or the generic grid of grown spheres) are free at 200 samples each by pinocchio + coal
+    (an independent check); some segments are rejected, and advancement certifies at least
+    what the grid does."""
+    robot = make_arm(arm)
+    problem = load_problem(arm, "bookshelf_small", 3)
+    world = problem.scene.world
+    rng = np.random.default_rng(4)
+    a = robot.sample_free(world, rng, 150, robot.lower, robot.upper)
+    b = np.clip(a + rng.normal(scale=0.4, size=a.shape), robot.lower, robot.upper)
+    n = intervals(np.linalg.norm(b - a, axis=1), 0.05)
+    grid = check_motions(robot, world, a, b - a, n, robot.lower, robot.upper)
+    chk = robot.check_motions(world, a, b - a, n, robot.lower, robot.upper) if how == "advancement" else grid
+    ok = chk.free == n
+    assert 10 < ok.sum() < 145
+    assert np.all(ok[grid.free == n])
+    m, g = _pinocchio(arm, problem, robot)
+    d, gd = m.createData(), pin.GeometryData(g)
+    s = np.linspace(0, 1, 200)
+    for e in np.flatnonzero(ok):
+        for qk in a[e] + s[:, None] * (b[e] - a[e]):
+            assert not pin.computeCollisions(m, d, g, gd, qk, True)
+
+
+def test_compiled_and_numpy_collision_agree_with_grown_sizes() -> None:
+    """The compiled test and the numpy one (CollisionWorld), plain and grown sizes."""
+    from pointplan.robots import arm as arm_module
+
+    robot = make_arm("panda")
+    world = load_problem("panda", "bookshelf_thin", 2).scene.world
+    rng = np.random.default_rng(5)
+    q = rng.uniform(robot.lower, robot.upper, (3000, 7))
+    grown, _ = robot.grown_parts(rng.normal(scale=0.02, size=q.shape), 0.5)
+    compiled = robot.collides(world, q), robot.collides(world, q, radii=grown)
+    original = arm_module._primitives_only
+    try:
+        arm_module._primitives_only = lambda w: False  # type: ignore[assignment]
+        plain = robot.collides(world, q), robot.collides(world, q, radii=grown)
+    finally:
+        arm_module._primitives_only = original
+    assert np.array_equal(compiled[0], plain[0]) and np.array_equal(compiled[1], plain[1])
+    assert compiled[1].sum() > compiled[0].sum() > 100
+
+
+def test_planners_solve_arm_problems_and_the_evaluator_agrees() -> None:
+    """Bi-RRT and OMPL's RRTConnect on MotionBenchMaker problems; every path passes the
+    evaluator (pinocchio + coal advancement). A straight line that pinocchio + coal find
+    colliding at a dense sampling is rejected by the evaluator."""
+    from pointplan.evaluation import check_path
+    from pointplan.planners import make_planner
+
+    robot = make_arm("panda")
+    problems = [load_problem("panda", sc, 1) for sc in ("box", "bookshelf_small", "table_pick")]
+    for name in ("birrt", "ompl:RRTConnect"):
+        planner = make_planner(name, robot, time_limit=20)
+        for p in problems:
+            res = planner.plan(p)
+            assert res.success, (name, p.tag)
+            assert check_path(robot, p, res.path, tolerance=1e-6), (name, p.tag)
+    p = problems[1]
+    m, g = _pinocchio("panda", p, robot)
+    d, gd = m.createData(), pin.GeometryData(g)
+    line = p.start + np.linspace(0, 1, 400)[:, None] * (p.goal - p.start)
+    assert any(pin.computeCollisions(m, d, g, gd, qk, True) for qk in line)
+    verdict = check_path(robot, p, np.stack([p.start, p.goal]), tolerance=1e-6)
+    assert not verdict and "touches" in verdict.reason
+
+
+def test_motionbenchmaker_problems_load() -> None:
+    """7 scenarios x 100 problems per arm; the values of a request come through in the
+    arm's joint order."""
+    robot = make_arm("panda")
+    for scenario in ("box", "cage"):
+        ps = load_problems("panda", scenario)
+        assert len(ps) == 100 and all(len(p.scene.obstacles) > 3 for p in ps)
+    p = load_problem("panda", "bookshelf_small", 1)
+    assert np.allclose(p.start, [0, -0.785, 0, -2.356, 0, 1.571, 0.785])
+    assert np.isclose(p.goal[0], 1.48904932702624) and np.isclose(p.goal[6], 1.06196398075046)
+    assert np.array_equal(p.scene.low, robot.lower) and p.scene.dim == 3
+    assert sum(isinstance(s, Cylinder) for s in p.scene.obstacles) == 3
+    with pytest.raises(ValueError, match="no problem 101"):
+        load_problem("panda", "box", 101)
+    with pytest.raises(ValueError, match="unknown MotionBenchMaker scenario"):
+        load_problem("panda", "kitchen", 1)
+
+
+def test_bad_robot_files_give_one_line(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match="no such URDF"):
+        load_arm(tmp_path / "missing.urdf")
+    bad = tmp_path / "bad.urdf"
+    bad.write_text("<robot name='x'><link name='a'>")
+    with pytest.raises(ValueError, match="pinocchio could not read it"):
+        load_arm(bad)
+    box = tmp_path / "box.urdf"
+    box.write_text(
+        "<robot name='b'><link name='l0'><collision><geometry><box size='1 1 1'/></geometry></collision></link>"
+        "<link name='l1'/><joint name='j' type='revolute'><parent link='l0'/><child link='l1'/>"
+        "<axis xyz='0 0 1'/><limit lower='-1' upper='1' effort='1' velocity='1'/></joint></robot>"
+    )
+    with pytest.raises(ValueError, match="link l0 has a Box collision element"):
+        load_arm(box)
