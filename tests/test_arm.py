@@ -229,3 +229,56 @@ def test_bad_robot_files_give_one_line(tmp_path: Path) -> None:
     )
     with pytest.raises(ValueError, match="link l0 has a Box collision element"):
         load_arm(box)
+
+
+def test_command_line_plans_evaluates_and_draws_an_arm(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``pointplan eval`` and ``render`` on a MotionBenchMaker scenario; a robot without
+    problems there gets one line."""
+    import json
+
+    from pointplan.cli import main
+
+    out = tmp_path / "eval.json"
+    assert (
+        main(
+            [
+                "eval",
+                "--env",
+                "mbm-box",
+                "--robot",
+                "panda",
+                "--planner",
+                "birrt",
+                "--episodes",
+                "2",
+                "--json",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    res = json.loads(out.read_text())
+    assert res["env"] == "mbm-box" and res["episodes"] == 2 and res["success_rate"] == 1.0
+    png, gif = tmp_path / "arm.png", tmp_path / "arm.gif"
+    assert (
+        main(
+            [
+                "render",
+                "--env",
+                "mbm-box",
+                "--robot",
+                "ur5",
+                "--planner",
+                "ompl:RRTConnect",
+                "-o",
+                str(png),
+                "--gif",
+                str(gif),
+            ]
+        )
+        == 0
+    )
+    assert png.stat().st_size > 10_000 and gif.stat().st_size > 10_000
+    assert main(["eval", "--env", "mbm-box", "--robot", "sshape", "--episodes", "1"]) == 2
+    assert "ship for the arms panda, ur5" in capsys.readouterr().err

@@ -434,6 +434,23 @@ def _test_problems(scenario: Scenario, args: argparse.Namespace, n: int) -> Sequ
     return scenario.problems("test", n, seed=args.seed)
 
 
+def _render_arm(problem: Problem, robot: Robot, result: Any, args: argparse.Namespace) -> int:
+    """``render`` for an arm: its spheres at the start, goal and along the path (PNG, GIF)."""
+    from .robots.arm import ArmRobot
+    from .viz.arm import render_arm_gif, render_arm_path
+
+    assert isinstance(robot, ArmRobot)
+    path = result.path if result is not None and len(result.path) else None
+    render_arm_path(problem, robot, path, args.output, title=f"{robot.name}, {problem.tag}  ({args.planner})")
+    print(f"wrote {args.output}")
+    if args.gif:
+        if path is None:
+            raise CLIError("--gif needs a path: pick a planner that solves the problem")
+        render_arm_gif(problem, robot, path, args.gif)
+        print(f"wrote {args.gif}")
+    return 0
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     from .observers import world_observation
 
@@ -452,6 +469,8 @@ def cmd_render(args: argparse.Namespace) -> int:
             args.observation = args.observation or seen[0]
             args.n_points = args.n_points or seen[1]
     robot = scenario.robot
+    if getattr(robot, "urdf", None):
+        return _render_arm(problem, robot, result, args)
     if robot.dim == 2:
         from .viz.plot2d import render_problem
 

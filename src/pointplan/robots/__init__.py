@@ -8,11 +8,15 @@ ROBOTS: dict[str, type[Robot]] = {"disc2d": Disc2D, "sphere3d": Sphere3D, "sshap
 
 
 def make_robot(name: str) -> Robot:
-    """A robot by name (``disc2d``, ``sphere3d``, ``sshape``)."""
+    """A robot by name (``disc2d``, ``sphere3d``, ``sshape``, or a shipped arm: ``panda``, ``ur5``)."""
+    from .arm import ARMS, make_arm
+
+    if name in ARMS:
+        return make_arm(name)
     try:
         return ROBOTS[name]()
     except KeyError:
-        raise ValueError(f"unknown robot {name!r}; known: {', '.join(ROBOTS)}") from None
+        raise ValueError(f"unknown robot {name!r}; known: {', '.join([*ROBOTS, *ARMS])}") from None
 
 
 __all__ = ["ROBOTS", "BodyParts", "Disc2D", "Robot", "SShape", "Sphere3D", "make_robot"]

@@ -36,7 +36,9 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass, field, replace
+from functools import cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -446,6 +448,30 @@ _JOINTS: dict[str, tuple[bool, tuple[float, float, float] | None]] = {
     "JointModelPZ": (True, (0.0, 0.0, 1.0)),
     "JointModelPrismaticUnaligned": (True, None),
 }
+
+
+#: arms that ship with the package: name -> (URDF, SRDF) in ``data/robots/<name>/``
+ARMS = {"panda": ("panda_spherized.urdf", "panda.srdf"), "ur5": ("ur5_spherized.urdf", "ur5.srdf")}
+
+
+def arm_data(name: str) -> Any:
+    """The package folder of a shipped arm's files."""
+    from importlib import resources
+
+    if name not in ARMS:
+        raise ValueError(f"unknown arm {name!r}; shipped: {', '.join(ARMS)} (or load_arm(urdf, srdf) for your own)")
+    return resources.files("pointplan") / "data" / "robots" / name
+
+
+@cache
+def make_arm(name: str, step: float = 0.1) -> ArmRobot:
+    """A shipped arm (``panda``, ``ur5``) from its spherized URDF and SRDF."""
+    from importlib import resources
+
+    d = arm_data(name)
+    urdf, srdf = ARMS[name]
+    with resources.as_file(d / urdf) as u, resources.as_file(d / srdf) as s:
+        return load_arm(u, s, name, step)
 
 
 def disabled_pairs(srdf: str | Path) -> set[frozenset[str]]:

@@ -21,15 +21,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry.shapes import Box, Cylinder, Shape, Sphere
-from ..robots.arm import ArmRobot, load_arm
+from ..robots.arm import ARMS, ArmRobot, arm_data, make_arm
+from .base import Scenario
 from .scene import Problem, Scene
 
 Array = NDArray[np.float64]
 
 #: the seven scenarios, in MotionBenchMaker's order
 SCENARIOS = ("table_pick", "table_under_pick", "box", "bookshelf_small", "bookshelf_tall", "bookshelf_thin", "cage")
-#: arms shipped with their MotionBenchMaker problems: name -> (URDF, SRDF) in data/robots/<name>/
-ARMS = {"panda": ("panda_spherized.urdf", "panda.srdf"), "ur5": ("ur5_spherized.urdf", "ur5.srdf")}
 
 
 @dataclass(eq=False)
@@ -44,21 +43,6 @@ class JointSpaceScene(Scene):
     @property
     def dim(self) -> int:
         return 3
-
-
-def _data_dir(arm: str) -> Any:
-    if arm not in ARMS:
-        raise ValueError(f"unknown arm {arm!r}; shipped: {', '.join(ARMS)}")
-    return resources.files("pointplan") / "data" / "robots" / arm
-
-
-@cache
-def make_arm(name: str, step: float = 0.1) -> ArmRobot:
-    """A shipped arm (``panda``, ``ur5``) from its spherized URDF and SRDF."""
-    d = _data_dir(name)
-    urdf, srdf = ARMS[name]
-    with resources.as_file(d / urdf) as u, resources.as_file(d / srdf) as s:
-        return load_arm(u, s, name, step)
 
 
 def _rotation(quat: Sequence[float]) -> Array:
@@ -118,7 +102,7 @@ def request_start_goal(request: dict[str, Any], joint_names: Sequence[str]) -> t
 @cache
 def _archive(arm: str) -> dict[str, bytes]:
     """Every file of an arm's problem archive: ``<scenario>_<arm>/<file>`` -> contents."""
-    with resources.as_file(_data_dir(arm) / "mbm_problems.tar.bz2") as path, tarfile.open(path, "r:bz2") as tar:
+    with resources.as_file(arm_data(arm) / "mbm_problems.tar.bz2") as path, tarfile.open(path, "r:bz2") as tar:
         out = {}
         for member in tar.getmembers():
             if member.isfile():
@@ -164,3 +148,55 @@ def load_problems(arm: str, scenario: str, indices: Sequence[int] | None = None)
     """Problems of a scenario for an arm (all of them by default)."""
     idx = range(1, problem_count(arm, scenario) + 1) if indices is None else indices
     return [load_problem(arm, scenario, int(i)) for i in idx]
+
+
+class MBMScenario(Scenario):
+    """A MotionBenchMaker scenario as a :class:`Scenario` (``mbm-box``, ...): its 100
+    problems, in order, for ``robot`` (``panda`` by default, ``ur5``, or an arm of the same
+    name). Test data only: the ``train`` split is refused; seeds do not change problems."""
+
+    horizon = 200
+    #: the problems are fixed files (workers load them, nothing is drawn)
+    fixed = True
+
+    def __init__(self, scenario: str, robot: str | ArmRobot | None = None) -> None:
+        if scenario not in SCENARIOS:
+            raise ValueError(f"unknown MotionBenchMaker scenario {scenario!r}; known: {', '.join(SCENARIOS)}")
+        name = robot if isinstance(robot, str) else getattr(robot, "name", "panda")
+        if name not in ARMS:
+            raise ValueError(f"MotionBenchMaker problems ship for the arms {', '.join(ARMS)}, not {name!r}")
+        self.scenario, self.arm = scenario, str(name)
+        self.name = f"mbm-{scenario}"
+        self.arm_robot = robot if isinstance(robot, ArmRobot) else make_arm(self.arm)
+        self.robot = self.arm_robot
+
+    def problem(self, split: str, index: int, seed: int = 0) -> Problem:
+        if split != "test":
+            raise ValueError("MotionBenchMaker problems are test data: only the test split exists")
+        return load_problem(self.arm, self.scenario, index + 1)
+
+    def scene(self, split: str, index: int) -> Scene:
+        return self.problem(split, index).scene
+
+    def problems(self, split: str, n: int, seed: int = 0) -> list[Problem]:
+        count = problem_count(self.arm, self.scenario)
+        if n > count:
+            raise ValueError(f"{self.name} has {count} problems for {self.arm}, not {n}")
+        return [self.problem(split, i) for i in range(n)]
+
+    @property
+    def bounds(self) -> tuple[Array, Array]:
+        return self.arm_robot.lower.copy(), self.arm_robot.upper.copy()
+
+
+def mbm_scenario_factory(scenario: str) -> Any:
+    """``make(robot=None) -> MBMScenario`` for the registry."""
+
+    def make(robot: str | ArmRobot | None = None) -> MBMScenario:
+        return MBMScenario(scenario, robot)
+
+    return make
+
+
+#: registry keys (``mbm-bookshelf_small`` -> ``mbmbookshelfsmall``) -> factories
+MBM_SCENARIOS = {"mbm" + s.replace("_", ""): mbm_scenario_factory(s) for s in SCENARIOS}

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from ..robots.base import Robot
 from .base import Scenario
+from .mbm import MBM_SCENARIOS
+from .mbm import SCENARIOS as MBM_NAMES
 from .narrow2d_variants import VARIANT_SCENARIOS
 from .scenes2d import Empty2DScenario, Narrow2DScenario
 from .scenes3d import SCENARIOS_3D
@@ -17,7 +19,7 @@ SCENARIOS: dict[str, type[Scenario]] = {"narrow2d": Narrow2DScenario, "empty2d":
 
 def scenario_names() -> list[str]:
     """Every name :func:`make_scenario` knows."""
-    return list(SCENARIOS) + list(SCENARIOS_3D)
+    return list(SCENARIOS) + list(SCENARIOS_3D) + [f"mbm-{s}" for s in MBM_NAMES]
 
 
 def scenario_key(name: str) -> str:
@@ -27,15 +29,18 @@ def scenario_key(name: str) -> str:
 
 
 def is_3d(name: str) -> bool:
-    """Whether ``name`` is one of the 3D scenarios."""
-    return scenario_key(name) in SCENARIOS_3D
+    """Whether ``name`` is one of the 3D scenarios (an arm's included)."""
+    return scenario_key(name) in SCENARIOS_3D or scenario_key(name) in MBM_SCENARIOS
 
 
 def make_scenario(name: str, robot: str | Robot | None = None, **kwargs: object) -> Scenario:
     """A scenario by name: ``narrow2d``, ``empty2d`` (2D disc); ``boxes3d``, ``synthetic3d``,
-    ``ycb3d``, ``dynamic3d``, ``slot``, ``qureshi3d`` (``robot``: ``sphere3d`` or ``sshape``).
+    ``ycb3d``, ``dynamic3d``, ``slot``, ``qureshi3d`` (``robot``: ``sphere3d`` or ``sshape``);
+    ``mbm-<scenario>`` (MotionBenchMaker; ``robot``: ``panda`` or ``ur5``).
     Also accepts Gymnasium ids such as ``pointplan/Boxes3D-v0``."""
     key = scenario_key(name)
+    if key in MBM_SCENARIOS:
+        return MBM_SCENARIOS[key](robot=robot)  # type: ignore[no-any-return]
     if key in SCENARIOS_3D:
         return SCENARIOS_3D[key](robot=robot, **kwargs)
     if key in SCENARIOS:
