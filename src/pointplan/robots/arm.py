@@ -375,20 +375,41 @@ class ArmRobot(Robot):
     ADVANCE_PER_RADIAN = 400
     ADVANCE_MIN = 64
 
+    #: before advancing, configurations this far apart (radians) along a segment are tested
+    #: plainly; a segment is advanced only up to its first colliding one (a blocked
+    #: shortcut or extension then costs a few tests instead of a long advance)
+    PROBE_SPACING = 0.1
+
     def advance(self, world: CollisionWorld, q0: Array, twist: Array) -> tuple[Array, Int]:
         """Conservative advancement along segments ``q0[e] + s twist[e]`` (``(E, n)`` each)
         in a scene of boxes, spheres and cylinders: the fraction certified free (1: the whole
         segment; -1: not even its start) and the configurations evaluated, per segment."""
-        max_iter = np.maximum(
-            self.ADVANCE_MIN, np.ceil(self.ADVANCE_PER_RADIAN * np.linalg.norm(twist, axis=-1))
-        ).astype(np.int64)
+        q0, twist = np.ascontiguousarray(q0, np.float64), np.ascontiguousarray(twist, np.float64)
+        length = np.linalg.norm(twist, axis=-1)
+        probes = np.minimum(32, np.ceil(length / self.PROBE_SPACING)).astype(np.int64)  # (the end is probed too)
+        k = int(probes.max(initial=0))
+        reach = np.ones(len(q0))
+        tested = np.zeros(len(q0), np.int64)
+        if k:
+            s = np.minimum(np.arange(1, k + 1)[None] / np.maximum(probes, 1)[:, None], 1.0)  # (E, k)
+            hit = self.collides(world, q0[:, None] + s[..., None] * twist[:, None]) & (
+                np.arange(k)[None] < probes[:, None]
+            )
+            first = np.where(hit.any(1), hit.argmax(1), -1)
+            reach = np.where(first >= 0, s[np.arange(len(q0)), np.maximum(first, 0)], 1.0)
+            tested = np.where(first >= 0, first + 1, probes)
+        frac, n = self._advance(world, q0, twist * reach[:, None], length * reach)
+        return np.where(frac > 0, frac * reach, frac), n + tested
+
+    def _advance(self, world: CollisionWorld, q0: Array, twist: Array, length: Array) -> tuple[Array, Int]:
         from ._arm_kernels import _arm_advance
 
+        max_iter = np.maximum(self.ADVANCE_MIN, np.ceil(self.ADVANCE_PER_RADIAN * length)).astype(np.int64)
         m, w = self.model, world
         out_s, out_n = np.empty(len(q0)), np.empty(len(q0), np.int64)
         p = len(self._radius)
         _arm_advance(
-            np.ascontiguousarray(q0), np.ascontiguousarray(twist), *self._packed, m.sphere_joint, m.sphere_center, m.self_pairs,
+            q0, np.ascontiguousarray(twist), *self._packed, m.sphere_joint, m.sphere_center, m.self_pairs,
             self._sizes[:p], self._sizes[p:], m.speed_bound, m.pair_speed_bound,
             w.box_c, w.box_r, w.box_h, w.sph_c, w.sph_r, w.cyl_c, w.cyl_r, w.cyl_rad, w.cyl_half, CONTACT_MARGIN, max_iter, out_s, out_n,
         )  # fmt: skip
