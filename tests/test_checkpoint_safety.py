@@ -1,4 +1,4 @@
-"""Loading a checkpoint never runs code: checkpoints hold only data (issue 10)."""
+"""Loading a checkpoint never runs code: checkpoints hold only data."""
 
 from __future__ import annotations
 

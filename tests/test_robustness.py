@@ -1,4 +1,4 @@
-"""Issue 14 robustness pieces: the 2D-Narrow variants, perturbed observers, the K-draw policy."""
+"""Robustness pieces: the 2D-Narrow variants, perturbed observers, the K-draw policy."""
 
 from __future__ import annotations
 
