@@ -418,3 +418,63 @@ def test_eval_json_records_carry_start_and_goal(tmp_path: Path) -> None:
     assert main(["eval", "--planner", "straight,birrt", "--episodes", "2", "--json", str(out), "--quiet"]) == 0
     both = json.loads(out.read_text())["planners"]
     assert all(len(both[n]["problems"]) == 2 and "start" in both[n]["problems"][0] for n in ("straight", "birrt"))
+
+
+# ---------------------------------------------------------------------------- messages
+def test_an_empty_ply_holds_no_points(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    header = "ply\nformat {}\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+    for fmt in ("ascii 1.0", "binary_little_endian 1.0"):
+        (tmp_path / "empty.ply").write_text(header.format(fmt))
+        assert main(["plan", "--points", str(tmp_path / "empty.ply"), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert (
+            "'empty.ply' holds no points (its vertex element has 0 vertices)" in err and "no vertex element" not in err
+        )
+    (tmp_path / "faces.ply").write_text(
+        "ply\nformat ascii 1.0\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n"
+    )
+    assert main(["plan", "--points", str(tmp_path / "faces.ply"), "--quiet"]) == 2
+    assert "'faces.ply' has no vertex element" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("n", "said"), [(1, "holds 1 point:"), (2, "holds 2 points:")])
+def test_too_few_points_are_counted_in_good_english(
+    tmp_path: Path, n: int, said: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    np.save(tmp_path / "few.npy", np.arange(3.0 * n).reshape(n, 3) + 1.0)
+    assert main(["plan", "--points", str(tmp_path / "few.npy"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert said in err and "too few to estimate normals" in err
+
+
+def test_unknown_environments_list_the_names_as_typed(capsys: pytest.CaptureFixture[str]) -> None:
+    from pointplan.scenes.scenarios import make_scenario, scenario_names
+
+    assert main(["eval", "--env", "narrow3d", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "narrow2d-ends, narrow2d-many, narrow2d-narrow, narrow2d-manynarrow" in err and "narrow2dends" not in err
+    for name in scenario_names():  # every listed name is accepted as listed
+        if not name.startswith("mbm-"):
+            assert make_scenario(name).name.replace("-", "") == name.replace("-", "")
+    assert make_scenario("narrow2dends").name == make_scenario("narrow2d_ends").name == "narrow2d-ends"
+
+
+@pytest.mark.parametrize(
+    ("argv", "prog", "message"),
+    [
+        (["plan", "--episodes", "0"], "pointplan plan", "argument --episodes: must be at least 1, got 0"),
+        (["eval", "--bogus"], "pointplan eval", "unrecognized arguments: --bogus"),
+        (["plan", "--start"], "pointplan plan", "argument --start: expected one argument"),
+        (["nope"], "pointplan", "argument command: invalid choice: 'nope'"),
+        ([], "pointplan", "the following arguments are required: command"),
+    ],
+)
+def test_argument_errors_come_first_with_a_hint_not_the_usage(
+    argv: list[str], prog: str, message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith(f"{prog}: error: ") and message in err[0], err
+    assert err[1:] == [f"(`{prog} -h` for help)"] and "usage:" not in " ".join(err)

@@ -12,7 +12,7 @@ import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn, cast
 
 import numpy as np
 
@@ -34,6 +34,17 @@ if TYPE_CHECKING:  # the commands import what they run when they run
 
 class CLIError(Exception):
     """A user-facing error: printed without a traceback."""
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser with its errors in two lines, the error first: ``pointplan plan:
+    error: <message>`` and where the help is, instead of the whole usage (exit code 2)."""
+
+    #: the subcommands' parsers by name (set by :func:`build_parser`)
+    commands: dict[str, argparse.ArgumentParser]
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n(`{self.prog} -h` for help)\n")
 
 
 def _int_at_least(text: str, low: int, what: str) -> int:
@@ -84,7 +95,8 @@ def _given_problem(args: argparse.Namespace, scene: Scene, robot: Robot) -> list
         if robot.config_dim == 7:
             q = np.concatenate([q[:3], q[3:] / np.linalg.norm(q[3:])])
         if np.any(q[: scene.dim] < scene.low) or np.any(q[: scene.dim] > scene.high):
-            hint = "; --bounds sets them (low then high)" if getattr(args, "points", None) else " of the scene file"
+            cloud = getattr(args, "points", None) or getattr(args, "depth", None)
+            hint = "; --bounds sets them (low then high)" if cloud else " of the scene file"
             raise CLIError(
                 f"{what}: position {q[: scene.dim].tolist()} lies outside the bounds {scene.low.tolist()} .. {scene.high.tolist()}{hint}"
             )
@@ -92,41 +104,92 @@ def _given_problem(args: argparse.Namespace, scene: Scene, robot: Robot) -> list
     return [Problem(scene, qs[0], qs[1], tag=f"{scene.name}/given")]
 
 
+#: the options that give the obstacles as data of one's own
+_DATA_SOURCES = ("scene", "points", "depth")
+#: the options that go with --depth
+_DEPTH_OPTIONS = ("intrinsics", "camera_pose", "depth_scale")
+
+
+def _data_source(args: argparse.Namespace) -> str | None:
+    """Which of --scene, --points and --depth was given (one at most), else None."""
+    given = [name for name in _DATA_SOURCES if getattr(args, name, None)]
+    if len(given) > 1:
+        raise CLIError(f"give one of --scene, --points and --depth, not {' and '.join('--' + g for g in given)}")
+    if "depth" not in given:
+        for name in _DEPTH_OPTIONS:
+            if getattr(args, name, None) is not None:
+                raise CLIError(f"--{name.replace('_', '-')} goes with --depth (a depth image)")
+    return given[0] if given else None
+
+
+def _depth_camera(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray | None, float | None]:
+    """--intrinsics, --camera-pose and --depth-scale, checked."""
+    intr = _numbers(getattr(args, "intrinsics", None), "--intrinsics")
+    if intr is None:
+        raise CLIError("--depth needs --intrinsics fx,fy,cx,cy (focal lengths and principal point, in pixels)")
+    if len(intr) != 4:
+        raise CLIError(f"--intrinsics: expected 4 numbers fx,fy,cx,cy, got {len(intr)}")
+    if not (np.all(np.isfinite(intr)) and intr[0] > 0 and intr[1] > 0):
+        raise CLIError(f"--intrinsics: fx and fy must be positive and all four finite, got {intr.tolist()}")
+    pose = _numbers(getattr(args, "camera_pose", None), "--camera-pose")
+    if pose is not None:
+        if len(pose) != 7:
+            raise CLIError(f"--camera-pose: expected 7 numbers x,y,z,qx,qy,qz,qw, got {len(pose)}")
+        if not np.all(np.isfinite(pose)):
+            raise CLIError(f"--camera-pose: expected finite numbers, got {pose.tolist()}")
+        if not np.linalg.norm(pose[3:]) > 0:
+            raise CLIError("--camera-pose: the quaternion qx,qy,qz,qw is zero")
+    scale = getattr(args, "depth_scale", None)
+    if scale is not None and not (math.isfinite(scale) and scale > 0):
+        raise CLIError(f"--depth-scale: expected a positive number (metres per unit), got {scale}")
+    return intr, pose, scale
+
+
+def _cloud_scene(args: argparse.Namespace, source: str) -> Scene:
+    """The scene of --points or --depth, in --bounds or around the cloud, --start and --goal."""
+    from .robots import make_robot
+    from .scenes.io import load_depth_scene, load_points_scene
+
+    robot_arg = getattr(args, "robot", None)
+    dim = make_robot(robot_arg).dim if robot_arg else None
+    if source == "depth":
+        if dim == 2:
+            raise CLIError(f"--depth: a depth image is 3D but robot {robot_arg} is 2D")
+        dim = 3
+    bounds = _numbers(getattr(args, "bounds", None), "--bounds")
+    if bounds is not None:
+        if len(bounds) not in (4, 6):
+            raise CLIError(f"--bounds: expected low then high (4 numbers in 2D, 6 in 3D), got {len(bounds)}")
+        if dim is not None and len(bounds) != 2 * dim:
+            what = "a depth image is 3D" if source == "depth" else f"{robot_arg} moves in {dim}D"
+            raise CLIError(f"--bounds: {what}, got {len(bounds)} numbers")
+        dim = len(bounds) // 2
+    box = None if bounds is None or dim is None else (bounds[:dim], bounds[dim:])
+    given = [
+        q
+        for q in (_numbers(getattr(args, "start", None), "--start"), _numbers(getattr(args, "goal", None), "--goal"))
+        if q is not None
+    ]
+    if source == "depth":
+        intr, pose, scale = _depth_camera(args)
+        return load_depth_scene(args.depth, intr, pose, depth_scale=scale, bounds=box, include=given)
+    return load_points_scene(args.points, dim=dim, bounds=box, include=given)
+
+
 def _scenario(args: argparse.Namespace) -> Scenario:
     from .robots import make_robot
     from .scenes.scenarios import make_scenario
 
-    if getattr(args, "scene", None) and getattr(args, "points", None):
-        raise CLIError("give either --scene or --points, not both")
-    if getattr(args, "scene", None) or getattr(args, "points", None):
-        from .scenes.io import CloudScenario, load_points_scene, load_scene
+    source = _data_source(args)
+    if source is not None:
+        from .scenes.io import CloudScenario, load_scene
 
-        robot_arg = getattr(args, "robot", None)
-        if getattr(args, "points", None):
-            dim = make_robot(robot_arg).dim if robot_arg else None
-            bounds = _numbers(getattr(args, "bounds", None), "--bounds")
-            if bounds is not None:
-                if len(bounds) not in (4, 6):
-                    raise CLIError(f"--bounds: expected low then high (4 numbers in 2D, 6 in 3D), got {len(bounds)}")
-                if dim is not None and len(bounds) != 2 * dim:
-                    raise CLIError(f"--bounds: {robot_arg} moves in {dim}D, got {len(bounds)} numbers")
-                dim = len(bounds) // 2
-            given = [
-                q
-                for q in (
-                    _numbers(getattr(args, "start", None), "--start"),
-                    _numbers(getattr(args, "goal", None), "--goal"),
-                )
-                if q is not None
-            ]
-            scene = load_points_scene(
-                args.points, dim=dim, bounds=None if bounds is None else (bounds[:dim], bounds[dim:]), include=given
-            )
-            sf_robot, fixed = None, []
-        else:
+        if source == "scene":
             sf = load_scene(args.scene)
             scene, sf_robot, fixed = sf.scene, sf.robot, sf.problems
-        robot_name = robot_arg or sf_robot or ("disc2d" if scene.dim == 2 else "sphere3d")
+        else:
+            scene, sf_robot, fixed = _cloud_scene(args, source), None, []
+        robot_name = getattr(args, "robot", None) or sf_robot or ("disc2d" if scene.dim == 2 else "sphere3d")
         robot = make_robot(robot_name)
         if robot.dim != scene.dim:
             raise CLIError(f"robot {robot_name} is {robot.dim}D but the scene is {scene.dim}D")
@@ -425,8 +488,7 @@ def _test_problems(scenario: Scenario, args: argparse.Namespace, n: int) -> Sequ
     if (
         _workers(args)
         and not getattr(scenario, "fixed", None)
-        and not getattr(args, "scene", None)
-        and not getattr(args, "points", None)
+        and not any(getattr(args, name, None) for name in _DATA_SOURCES)
     ):
         from .distributed import ScenarioProblems
 
@@ -1498,7 +1560,7 @@ def _add_plan_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
     p = _subparser(
         sub,
         "plan",
-        "plan the problems of a scene file or of a point cloud file (or test problems of --env)",
+        "plan the problems of a scene file, of a point cloud file or of a depth image (or test problems of --env)",
         epilog=CLAIMS_EPILOG,
     )
     _add_common(p)
@@ -1507,8 +1569,25 @@ def _add_plan_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
         help="plan among the points of a cloud file (.ply, .pcd, .npy, .xyz, .txt, .csv; normals estimated if it has none) instead of a scene file",
     )
     p.add_argument(
+        "--depth",
+        help="plan among the points of a depth image instead of a scene file: .npy (float, metres; or integers, see --depth-scale), .png (16-bit, millimetres) or .tif; pixels of depth 0, NaN or inf are dropped and normals come from the pixel grid, towards the camera; needs --intrinsics (and --camera-pose unless the camera is the world frame)",
+    )
+    p.add_argument(
+        "--intrinsics",
+        help="with --depth: the pinhole camera's fx,fy,cx,cy in pixels (focal lengths and principal point)",
+    )
+    p.add_argument(
+        "--camera-pose",
+        help="with --depth: the camera's pose in the world as x,y,z,qx,qy,qz,qw (position, then a quaternion); the camera looks along its +z with x to the right and y down in the image (the pinhole/OpenCV convention); write --camera-pose=-1,... when the first number is negative (default: the world frame)",
+    )
+    p.add_argument(
+        "--depth-scale",
+        type=float,
+        help="with --depth: metres per unit of the image (default: 0.001, millimetres, for an integer image such as a 16-bit PNG; 1 for a float image)",
+    )
+    p.add_argument(
         "--bounds",
-        help="with --points: the workspace as low then high, e.g. 0,0,1,1; write --bounds=-1,... when the first number is negative (default: the box of the cloud, --start and --goal grown by 10%% of its largest side)",
+        help="with --points or --depth: the workspace as low then high, e.g. 0,0,1,1; write --bounds=-1,... when the first number is negative (default: the box of the cloud, --start and --goal (and --depth's camera) grown by 10%% of its largest side)",
     )
     p.add_argument("--start", help="plan this start (with --goal) instead of the scene's problems, e.g. 0.1,0.1")
     p.add_argument("--goal", help="the goal of --start, e.g. 0.9,0.9 (an S-shape takes x,y,z or x,y,z,qx,qy,qz,qw)")
@@ -1717,12 +1796,12 @@ def _add_convert_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None
     p.set_defaults(func=cmd_convert_checkpoint)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser() -> ArgumentParser:
     from . import __version__
 
-    parser = argparse.ArgumentParser(prog="pointplan", description="Neural motion planning from point clouds.")
+    parser = ArgumentParser(prog="pointplan", description="Neural motion planning from point clouds.")
     parser.add_argument("--version", action="version", version=f"pointplan {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = cast("_SubParsersAction[argparse.ArgumentParser]", parser.add_subparsers(dest="command", required=True))
     for add in (
         _add_eval_parser,
         _add_render_parser,
@@ -1741,12 +1820,15 @@ def build_parser() -> argparse.ArgumentParser:
     from .recipes import add_parser as add_recipe_parser
 
     add_recipe_parser(sub)
+    parser.commands = dict(sub.choices)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # named by the subcommand, whose options they are not
+        parser.commands.get(args.command, parser).error(f"unrecognized arguments: {' '.join(extra)}")
     t0 = time.perf_counter()
     try:
         code = int(args.func(args))

@@ -7,8 +7,9 @@
 * :func:`estimate_normals` fits a plane (a line in 2D) to each point's ``k`` nearest
   neighbours (principal component analysis, all points in one batched eigen-decomposition)
   and orients the normal towards a viewpoint or away from the obstacle's interior.
-* :func:`depth_to_points` turns a depth image and pinhole intrinsics into world points;
-  :func:`read_depth_image` reads one from ``.npy`` or a (16-bit) PNG.
+* :func:`depth_to_cloud` turns a depth image, pinhole intrinsics and the camera's pose
+  into world points with normals from the pixel grid; :func:`read_depth_cloud` does it
+  for a file (``.npy``, a 16-bit PNG or a TIFF).
 
 Problems with the input raise :class:`CloudError`; the scene reader turns it into a
 :class:`~pointplan.scenes.io.SceneFormatError` naming the scene file and the field.
@@ -16,7 +17,10 @@ Problems with the input raise :class:`CloudError`; the scene reader turns it int
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +34,13 @@ DEFAULT_K = 16
 #: weight of the surface variation against the distance to the plane (in neighbour spacings)
 #: when a point picks the best neighbouring fit (see :func:`pca_normals`)
 SHARP_VARIATION_WEIGHT = 10.0
+#: depth image files :func:`read_depth_image` reads
+DEPTH_FILE_SUFFIXES = (".png", ".npy", ".tif", ".tiff")
+#: metres per unit of an integer depth image (a 16-bit PNG holds millimetres) by default
+INTEGER_DEPTH_SCALE = 0.001
+#: largest depth change between neighbouring pixels of one surface, relative to the depth
+#: (:func:`depth_to_cloud`'s normals)
+MAX_DEPTH_JUMP = 0.05
 PCD_MISSING = "reading .pcd files needs the 'pypcd4' package: pip install 'pointplan[pcd]'"
 
 
@@ -38,6 +49,23 @@ class CloudError(ValueError):
 
 
 # ============================================================================ files
+def one_line(exc: BaseException) -> str:
+    """What went wrong in one line: the first line of the exception's message, or, for a
+    validation error listing problems (pydantic's, as pypcd4 raises for a bad header),
+    the first three of them as ``field: problem``."""
+    errors = getattr(exc, "errors", None)
+    if callable(errors):
+        try:
+            found = [f"{'.'.join(str(x) for x in e['loc'])}: {e['msg']}" for e in errors()]
+        except Exception:  # not a list of pydantic's problems after all
+            found = []
+        if found:
+            more = f" (and {len(found) - 3} more)" if len(found) > 3 else ""
+            return "; ".join(found[:3]) + more
+    lines = str(exc).strip().splitlines()
+    return lines[0].strip() if lines else type(exc).__name__
+
+
 def read_point_file(path: str | Path) -> tuple[Array, Array | None]:
     """``(points (P, c), normals (P, c) or None)`` from a point file, as float64.
 
@@ -73,13 +101,21 @@ def _read_ply(path: Path) -> tuple[Array, Array | None]:
         with open(path, "rb") as f:
             kwargs = load_ply(f)
     except Exception as exc:  # trimesh raises many kinds of errors on bad files
-        raise CloudError(f"cannot read PLY file {path.name!r}: {exc}") from None
+        raise CloudError(f"cannot read PLY file {path.name!r}: {one_line(exc)}") from None
     vertices = kwargs.get("vertices")
-    if vertices is None:
+    if vertices is None or len(vertices) == 0:
+        raw = kwargs.get("metadata", {}).get("_ply_raw", {})
+        if isinstance(raw, dict) and "vertex" in raw:
+            raise CloudError(f"PLY file {path.name!r} holds no points (its vertex element has 0 vertices)")
         raise CloudError(f"PLY file {path.name!r} has no vertex element")
-    points = np.asarray(vertices, np.float64).reshape(len(vertices), -1)
     normals = kwargs.get("vertex_normals")  # trimesh fills it from nx, ny, nz when present
-    return points, None if normals is None else np.asarray(normals, np.float64).reshape(points.shape)
+    try:
+        points = np.asarray(vertices, np.float64).reshape(len(vertices), -1)
+        if normals is not None:
+            normals = np.asarray(normals, np.float64).reshape(points.shape)
+    except (TypeError, ValueError) as exc:
+        raise CloudError(f"cannot read PLY file {path.name!r}: {one_line(exc)}") from None
+    return points, normals
 
 
 def _read_pcd(path: Path) -> tuple[Array, Array | None]:
@@ -98,7 +134,7 @@ def _read_pcd(path: Path) -> tuple[Array, Array | None]:
     except CloudError:
         raise
     except Exception as exc:
-        raise CloudError(f"cannot read PCD file {path.name!r}: {exc}") from None
+        raise CloudError(f"cannot read PCD file {path.name!r}: {one_line(exc)}") from None
     return points.reshape(-1, 3), None if normals is None else normals.reshape(-1, 3)
 
 
@@ -110,7 +146,7 @@ def _read_table(path: Path) -> tuple[Array, Array | None]:
             delimiter = "," if path.suffix.lower() == ".csv" else None
             data = np.loadtxt(path, dtype=np.float64, delimiter=delimiter, comments="#", ndmin=2)
     except Exception as exc:
-        raise CloudError(f"cannot read points file {path.name!r}: {exc}") from None
+        raise CloudError(f"cannot read points file {path.name!r}: {one_line(exc)}") from None
     data = np.asarray(data)
     if not np.issubdtype(data.dtype, np.number):
         raise CloudError(f"points file {path.name!r} does not hold numbers (dtype {data.dtype})")
@@ -222,7 +258,7 @@ def estimate_normals(
     if p.ndim != 2 or p.shape[1] not in (2, 3):
         raise ValueError(f"points must be a (P, 2) or (P, 3) array, got shape {p.shape}")
     if len(p) < p.shape[1]:
-        raise CloudError(f"cannot estimate normals from {len(p)} points")
+        raise CloudError(f"cannot estimate normals from {len(p)} point{'' if len(p) == 1 else 's'}")
     n = pca_normals(p, k)
     if viewpoint is not None:
         v = np.asarray(viewpoint, np.float64).reshape(-1)
@@ -274,10 +310,12 @@ def _agree(p: Array, n: Array, idx: NDArray[np.int64], dist: Array, rounds: int 
 
 
 # ============================================================================ depth images
-def read_depth_image(path: str | Path) -> Array:
-    """A depth image ``(H, W)`` as float64 in the file's units: ``.npy`` or an image file
-    (16-bit PNG, as depth cameras write them, read with Pillow)."""
-    path = Path(path)
+def _read_depth_raw(path: Path) -> NDArray[Any]:
+    """The depth image in ``path`` as stored (its own dtype), checked to be ``(H, W)`` numbers."""
+    if path.suffix.lower() not in DEPTH_FILE_SUFFIXES:
+        raise CloudError(
+            f"unsupported depth image type {path.suffix or '(none)'!r} of {path.name!r}; use one of {', '.join(DEPTH_FILE_SUFFIXES)}"
+        )
     try:
         if path.suffix.lower() == ".npy":
             depth = np.load(path, allow_pickle=False)
@@ -286,14 +324,68 @@ def read_depth_image(path: str | Path) -> Array:
 
             with Image.open(path) as im:
                 depth = np.asarray(im)
-    except Exception as exc:
-        raise CloudError(f"cannot read depth image {path.name!r}: {exc}") from None
+    except Exception as exc:  # Pillow and NumPy raise many kinds of errors on bad files
+        raise CloudError(f"cannot read depth image {path.name!r}: {one_line(exc)}") from None
     depth = np.asarray(depth)
-    if depth.ndim != 2 or not np.issubdtype(depth.dtype, np.number):
+    if depth.ndim != 2 or not (np.issubdtype(depth.dtype, np.integer) or np.issubdtype(depth.dtype, np.floating)):
         raise CloudError(
             f"depth image {path.name!r}: expected one channel of numbers (H, W), got shape {depth.shape} of {depth.dtype}"
         )
-    return depth.astype(np.float64)
+    return depth
+
+
+def read_depth_image(path: str | Path) -> Array:
+    """A depth image ``(H, W)`` as float64 in the file's units: ``.npy`` or an image file
+    (16-bit PNG, as depth cameras write them, or TIFF; read with Pillow)."""
+    return _read_depth_raw(Path(path)).astype(np.float64)
+
+
+def default_depth_scale(depth: NDArray[Any]) -> float:
+    """Metres per depth unit when none is given: :data:`INTEGER_DEPTH_SCALE` (millimetres)
+    for an integer image such as a 16-bit PNG, 1 (metres) for a floating-point one."""
+    return INTEGER_DEPTH_SCALE if np.issubdtype(np.asarray(depth).dtype, np.integer) else 1.0
+
+
+def camera_intrinsics(intrinsics: Sequence[float] | Array) -> tuple[float, float, float, float]:
+    """``(fx, fy, cx, cy)`` checked: four finite numbers, the focal lengths positive."""
+    k = np.asarray(intrinsics, np.float64).reshape(-1)
+    if k.shape != (4,) or not np.all(np.isfinite(k)) or not (k[0] > 0 and k[1] > 0):
+        raise CloudError(
+            f"intrinsics: expected 4 finite numbers fx, fy, cx, cy with fx, fy > 0, got {np.round(k, 6).tolist()}"
+        )
+    return float(k[0]), float(k[1]), float(k[2]), float(k[3])
+
+
+def camera_pose(pose: Sequence[float] | Array) -> Array:
+    """A 4 x 4 camera-to-world transform from one (checked to be rigid) or from 7 numbers
+    ``x, y, z, qx, qy, qz, qw`` (the camera's position and orientation in the world; the
+    quaternion is normalised)."""
+    from .lie import quat_to_matrix
+
+    p = np.asarray(pose, np.float64)
+    if p.shape == (4, 4):
+        rot = p[:3, :3]
+        rigid = np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) and np.linalg.det(rot) > 0
+        if not np.all(np.isfinite(p)) or not rigid or not np.allclose(p[3], [0, 0, 0, 1]):
+            raise CloudError("camera pose: a 4 x 4 matrix must be a rigid transform (rotation and translation)")
+        return p.copy()
+    p = p.reshape(-1)
+    if p.shape != (7,) or not np.all(np.isfinite(p)):
+        raise CloudError(f"camera pose: expected 7 finite numbers x, y, z, qx, qy, qz, qw, got {p.size}")
+    if not np.linalg.norm(p[3:]) > 1e-12:
+        raise CloudError("camera pose: the quaternion qx, qy, qz, qw is zero")
+    out = np.eye(4)
+    out[:3, :3] = quat_to_matrix(p[3:])
+    out[:3, 3] = p[:3]
+    return out
+
+
+def _back_project(z: Array, fx: float, fy: float, cx: float, cy: float) -> Array:
+    """Camera-frame points ``(H, W, 3)`` of depths ``z`` (metres, NaN where invalid)."""
+    h, w = z.shape
+    u = np.arange(w, dtype=np.float64)[None, :]
+    v = np.arange(h, dtype=np.float64)[:, None]
+    return np.stack([(u - cx) * z / fx, (v - cy) * z / fy, z], axis=-1)
 
 
 def depth_to_points(
@@ -305,7 +397,8 @@ def depth_to_points(
     pose: Array | None = None,
     depth_scale: float = 1.0,
 ) -> Array:
-    """World points ``(P, 3)`` of a depth image ``(H, W)`` seen by a pinhole camera.
+    """World points ``(P, 3)`` of a depth image ``(H, W)`` seen by a pinhole camera (the
+    points of :func:`depth_to_cloud`, without normals).
 
     Pixel ``(u, v)`` (column, row) with depth ``z = depth[v, u] * depth_scale`` is the point
     ``((u - cx) z / fx, (v - cy) z / fy, z)`` of the camera frame (x right, y down, z along
@@ -315,11 +408,115 @@ def depth_to_points(
     d = np.asarray(depth, np.float64)
     if d.ndim != 2:
         raise ValueError(f"depth must be an (H, W) image, got shape {d.shape}")
-    z = d * float(depth_scale)
-    v, u = np.nonzero(np.isfinite(z) & (z > 0))
-    z = z[v, u]
-    pts = np.stack([(u - cx) * z / fx, (v - cy) * z / fy, z], axis=1)
+    with np.errstate(invalid="ignore", over="ignore"):
+        z = d * float(depth_scale)
+    valid = np.isfinite(z) & (z > 0)
+    pts = _back_project(np.where(valid, z, np.nan), fx, fy, cx, cy)[valid]
     if pose is not None:
         t = np.asarray(pose, np.float64).reshape(4, 4)
         pts = pts @ t[:3, :3].T + t[:3, 3]
     return pts
+
+
+def _grid_step(p: Array, z: Array, axis: int, max_jump: float) -> Array:
+    """Per pixel, the step ``(H, W, 3)`` from the previous to the next pixel along ``axis``
+    (0: down a column, 1: along a row) on the same surface: of the steps to the neighbour
+    before and after, the shorter of those whose depth changes by at most ``max_jump``
+    times the nearer depth (NaN where neither does: an edge or a lone pixel)."""
+    pm, zm = np.moveaxis(p, axis, 0), np.moveaxis(z, axis, 0)
+    step = pm[1:] - pm[:-1]
+    with np.errstate(invalid="ignore"):
+        same = np.abs(zm[1:] - zm[:-1]) <= max_jump * np.fmin(zm[1:], zm[:-1])
+    step[~same] = np.nan
+    after, before = np.full_like(pm, np.nan), np.full_like(pm, np.nan)
+    after[:-1], before[1:] = step, step
+    la, lb = np.linalg.norm(after, axis=-1), np.linalg.norm(before, axis=-1)
+    with np.errstate(invalid="ignore"):
+        use_before = ~(la <= lb) & np.isfinite(lb)
+    return np.moveaxis(np.where(use_before[..., None], before, after), 0, axis)
+
+
+def depth_to_cloud(
+    depth: Array,
+    intrinsics: Sequence[float] | Array,
+    pose: Sequence[float] | Array | None = None,
+    depth_scale: float = 1.0,
+    max_jump: float = MAX_DEPTH_JUMP,
+) -> tuple[Array, Array]:
+    """World points ``(P, 3)`` and unit normals ``(P, 3)`` of a depth image ``(H, W)``.
+
+    ``intrinsics`` are ``fx, fy, cx, cy`` of the pinhole camera, in pixels; ``pose`` is
+    where the camera is in the world (see :func:`camera_pose`: a 4 x 4 camera-to-world
+    matrix or ``x, y, z, qx, qy, qz, qw``; default: the world frame). The camera looks
+    along its +z with x right and y down (OpenCV's convention): pixel ``(u, v)`` (column,
+    row) with depth ``z = depth[v, u] * depth_scale`` is the point ``((u - cx) z / fx,
+    (v - cy) z / fy, z)`` of the camera frame. Pixels of zero, negative or non-finite
+    depth (no return) are dropped; the others come row by row.
+
+    Normals come from the image grid: the cross product of the steps to the neighbouring
+    pixels along the row and down the column (each the shorter of the steps before and
+    after that stays on the surface: depth changing by at most ``max_jump`` times the
+    depth), oriented towards the camera. A pixel without such a neighbour in one of the
+    two directions (a lone pixel, a line one pixel thin) takes the direction back along
+    its ray.
+    """
+    fx, fy, cx, cy = camera_intrinsics(intrinsics)
+    d = np.asarray(depth)
+    if d.ndim != 2 or not (np.issubdtype(d.dtype, np.integer) or np.issubdtype(d.dtype, np.floating)):
+        raise CloudError(f"depth: expected an (H, W) image of numbers, got shape {d.shape} of {d.dtype}")
+    scale = float(depth_scale)
+    if not (math.isfinite(scale) and scale > 0):
+        raise CloudError(f"depth scale: expected a positive number (metres per unit), got {depth_scale}")
+    with np.errstate(invalid="ignore", over="ignore"):
+        z = d.astype(np.float64) * scale
+    valid = np.isfinite(z) & (z > 0)
+    if not valid.any():
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    z = np.where(valid, z, np.nan)
+    p = _back_project(z, fx, fy, cx, cy)
+    with np.errstate(invalid="ignore", over="ignore"):
+        du, dv = _grid_step(p, z, 1, max_jump), _grid_step(p, z, 0, max_jump)
+        n = np.cross(du[valid], dv[valid])
+        pts = p[valid]
+        size = np.linalg.norm(n, axis=1)
+        good = np.isfinite(size) & (
+            size > 1e-12 * np.linalg.norm(du[valid], axis=1) * np.linalg.norm(dv[valid], axis=1)
+        )
+        ray = -pts / np.linalg.norm(pts, axis=1, keepdims=True)
+        n = np.where(good[:, None], n / np.where(good, size, 1.0)[:, None], ray)
+        n = np.where((np.einsum("pi,pi->p", n, pts) > 0)[:, None], -n, n)  # the camera is at the origin
+    if pose is not None:
+        t = camera_pose(pose)
+        pts, n = pts @ t[:3, :3].T + t[:3, 3], n @ t[:3, :3].T
+    return pts, n
+
+
+def read_depth_cloud(
+    path: str | Path,
+    intrinsics: Sequence[float] | Array,
+    pose: Sequence[float] | Array | None = None,
+    depth_scale: float | None = None,
+    stride: int = 1,
+) -> tuple[Array, Array]:
+    """Points and normals (see :func:`depth_to_cloud`) of the depth image in ``path``
+    (``.png``, ``.tif``, ``.tiff`` or ``.npy``).
+
+    ``depth_scale`` is metres per unit of the file; by default 0.001 (millimetres) for an
+    integer image such as a 16-bit PNG and 1 (metres) for a floating-point one. ``stride``
+    keeps every ``stride``-th pixel in each direction (the intrinsics scaled to match).
+    Raises :class:`CloudError` when the file cannot be read or has no valid pixel.
+    """
+    path = Path(path)
+    depth = _read_depth_raw(path)
+    scale = default_depth_scale(depth) if depth_scale is None else depth_scale
+    stride = min(int(stride), max(depth.shape, default=1))  # a longer stride keeps the same pixels
+    if stride > 1:
+        fx, fy, cx, cy = camera_intrinsics(intrinsics)
+        depth = depth[::stride, ::stride]
+        intrinsics = (fx / stride, fy / stride, cx / stride, cy / stride)
+    points, normals = depth_to_cloud(depth, intrinsics, pose, scale)
+    if len(points) == 0:
+        raise CloudError(
+            f"depth image {path.name!r} holds no valid pixel (every depth is 0, negative, NaN or infinite)"
+        )
+    return points, normals

@@ -22,6 +22,8 @@ import pickle
 import re
 import zipfile
 from collections import OrderedDict
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -117,9 +119,46 @@ def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> None:
     tmp.replace(path)
 
 
-def _first_line(e: BaseException) -> str:
-    lines = str(e).strip().splitlines()
-    return f"{type(e).__name__}: {lines[0] if lines else ''}".rstrip(": ")
+def first_line(e: BaseException) -> str:
+    """``Type: message`` in one line (a first line ending in a colon takes the next along)."""
+    lines = [line.strip() for line in str(e).strip().splitlines() if line.strip()]
+    text = lines[0] if lines else ""
+    if text.endswith(":") and len(lines) > 1:
+        text = f"{text} {lines[1]}"
+    return f"{type(e).__name__}: {text}".rstrip(": ")
+
+
+@contextmanager
+def rebuilding(path: str | Path, what: str) -> Iterator[None]:
+    """Turn what goes wrong while rebuilding ``what`` (``"policy"``, ...) from a loaded
+    checkpoint's contents (a missing key, a value of the wrong type, weights that do not fit
+    the network) into one-line ``CheckpointError``\\ s naming ``path``."""
+    try:
+        yield
+    except CheckpointError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, RuntimeError) as e:
+        raise CheckpointError(f"{path}: not a usable {what} checkpoint ({first_line(e)})") from None
+
+
+def check_weights(path: str | Path, expected: dict[str, Any], weights: Any, what: str = "network") -> None:
+    """Refuse ``weights`` (a state dict read from ``path``) unless it holds exactly the
+    tensors of ``expected`` (another state dict, e.g. of a network built on the ``meta``
+    device, which allocates nothing) with their shapes."""
+    if not isinstance(weights, dict):
+        raise CheckpointError(f"{path}: the {what}'s weights are {_type_name(weights)}, not a state dict")
+    missing = [k for k in expected if k not in weights]
+    extra = [k for k in weights if k not in expected]
+    if missing or extra:
+        which = f"missing {missing[0]!r}" if missing else f"unexpected {extra[0]!r}"
+        raise CheckpointError(f"{path}: the {what}'s weights do not match its settings ({which})")
+    for k, v in expected.items():
+        w = weights[k]
+        if not isinstance(w, torch.Tensor) or tuple(w.shape) != tuple(v.shape):
+            got = tuple(w.shape) if isinstance(w, torch.Tensor) else _type_name(w)
+            raise CheckpointError(
+                f"{path}: the {what}'s weights do not match its settings ({k}: {got}, expected {tuple(v.shape)})"
+            )
 
 
 def _read_data_only(path: Path, device: str) -> Any:
@@ -132,14 +171,14 @@ def _read_data_only(path: Path, device: str) -> Any:
         return torch.load(path, map_location=device, weights_only=True)
     except pickle.UnpicklingError as e:
         if "weights only load failed" not in str(e).lower():
-            raise CheckpointError(f"{path}: not a readable checkpoint ({_first_line(e)})") from None
+            raise CheckpointError(f"{path}: not a readable checkpoint ({first_line(e)})") from None
         found = re.search(r"GLOBAL ([\w.]+)", str(e))
         what = f" ({found.group(1)})" if found else ""
         raise CheckpointError(
             f"{path}: refused: it holds pickled Python objects{what}, which could run code when loaded; {convert_hint(path)}"
         ) from None
     except Exception as e:  # torch raises many kinds on a corrupt file
-        raise CheckpointError(f"{path}: not a readable checkpoint ({_first_line(e)})") from None
+        raise CheckpointError(f"{path}: not a readable checkpoint ({first_line(e)})") from None
 
 
 def load_checkpoint(path: str | Path, device: str = "cpu") -> dict[str, Any]:

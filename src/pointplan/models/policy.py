@@ -15,7 +15,7 @@ from ..config import from_dict
 from ..robots import make_robot
 from ..robots.base import Robot
 from .actor_critic import LOG_STD_MAX, LOG_STD_MIN, Actor, NetConfig
-from .checkpoint import check_compatible, load_checkpoint
+from .checkpoint import CheckpointError, check_compatible, check_weights, load_checkpoint, rebuilding
 from .inputs import goal_input, obs_input
 
 
@@ -44,11 +44,19 @@ class Policy:
 
     @classmethod
     def from_checkpoint(cls, path: str | Path, device: str = "cpu") -> Policy:
+        """The policy of a checkpoint. Anything wrong with the file or its contents raises
+        a one-line :class:`~pointplan.models.checkpoint.CheckpointError`."""
         data = load_checkpoint(path, device)
-        robot = make_robot(data["robot"])
-        net = from_dict(NetConfig, data["net"])
-        actor = Actor(tuple(data["obs_shape"]), robot.twist_dim, robot.twist_dim, net)
-        actor.load_state_dict(data["actor"])  # a shared encoder's weights come with the actor
+        with rebuilding(path, "policy"):
+            _check_policy_fields(data, path)
+            robot = make_robot(data["robot"])
+            net = from_dict(NetConfig, data["net"])
+            shape = tuple(data["obs_shape"])
+            with torch.device("meta"):  # the shapes of the weights, allocating nothing
+                expected = Actor(shape, robot.twist_dim, robot.twist_dim, net).state_dict()
+            check_weights(path, expected, data["actor"], "actor")
+            actor = Actor(shape, robot.twist_dim, robot.twist_dim, net)
+            actor.load_state_dict(data["actor"])  # a shared encoder's weights come with the actor
         actor.detach_encoder = False
         meta = {k: v for k, v in data.items() if k not in ("actor", "trainer")}
         policy = cls(actor.to(device), robot, meta, device)
@@ -78,6 +86,23 @@ class Policy:
         if self.device.type != "cpu":
             return None
         return NumpyPointNetActor.from_actor(self.actor)
+
+
+def _check_policy_fields(data: dict[str, Any], path: str | Path) -> None:
+    """The fields of a policy checkpoint that rebuilding it and observing for it read."""
+    for key in ("robot", "observation", "obs_shape", "net", "actor"):
+        if key not in data:
+            raise CheckpointError(f"{path}: not a policy checkpoint (it has no {key!r})")
+    if not isinstance(data["robot"], str) or not isinstance(data["observation"], str):
+        raise CheckpointError(f"{path}: its robot and observation must be names (strings)")
+    shape = data["obs_shape"]
+    if not isinstance(shape, (list, tuple)) or not shape or not all(type(x) is int and x > 0 for x in shape):
+        raise CheckpointError(f"{path}: obs_shape must be a list of positive integers, got {shape!r}")
+    if not isinstance(data["net"], dict):
+        raise CheckpointError(f"{path}: net must hold the network's settings, got {type(data['net']).__name__}")
+    n_points = data.get("n_points", 64)
+    if type(n_points) is not int or n_points < 1:
+        raise CheckpointError(f"{path}: n_points must be a positive integer, got {n_points!r}")
 
 
 def _elu(x: np.ndarray) -> np.ndarray:

@@ -40,12 +40,14 @@ from numpy.typing import NDArray
 from ..geometry import lie
 from ..geometry.clouds import (
     DEFAULT_K,
+    DEPTH_FILE_SUFFIXES,
     POINT_FILE_SUFFIXES,
     CloudError,
+    camera_pose,
     check_normals,
-    depth_to_points,
     estimate_normals,
-    read_depth_image,
+    one_line,
+    read_depth_cloud,
     read_point_file,
 )
 from ..geometry.shapes import Box, Capsule, Cylinder, Mesh, PointCloud, Shape, Sphere
@@ -62,8 +64,8 @@ VERSION = 1
 ROBOT_DIMS: dict[str, tuple[int, int]] = {"disc2d": (2, 2), "sphere3d": (3, 3), "sshape": (3, 7)}
 
 OBSTACLE_TYPES = ("box", "sphere", "capsule", "cylinder", "mesh", "points")
-DEPTH_FILE_SUFFIXES = (".png", ".npy", ".tif", ".tiff")
-_POINTS_FIELDS = ("type", "path", "depth", "k", "viewpoint", "intrinsics", "camera_pose", "depth_scale", "stride")
+_DEPTH_FIELDS = ("intrinsics", "camera_pose", "depth_scale", "stride")
+_POINTS_FIELDS = ("type", "path", "depth", "k", "viewpoint", *_DEPTH_FIELDS)
 
 _TOP_FIELDS = ("format", "version", "dim", "bounds", "robot", "obstacles", "problems", "name")
 _PROBLEM_FIELDS = ("start", "goal", "tag")
@@ -123,6 +125,11 @@ def _is_number(x: Any) -> bool:
         return math.isfinite(x)
     except OverflowError:  # an integer too large for a float
         return False
+
+
+def _count(n: int, word: str) -> str:
+    """``1 point``, ``3 points``."""
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
 
 
 def _join(prefix: str, key: str | int) -> str:
@@ -309,16 +316,21 @@ class _Reader:
         return self.points_obstacle(entry, where, dim)
 
     def points_obstacle(self, entry: dict[str, Any], where: str, dim: int) -> PointCloud:
-        """A ``points`` obstacle: a point file or a depth image, normals read or estimated."""
+        """A ``points`` obstacle: a point file (normals read or estimated) or a depth image
+        (normals from its pixel grid)."""
         at = lambda key: _join(where, key)
         self.only(entry, _POINTS_FIELDS, where, "a point cloud")
         has_path, has_depth = "path" in entry, "depth" in entry
         if has_path == has_depth:
             self.fail(where, "a points obstacle needs exactly one of 'path' (a point file) and 'depth' (a depth image)")
-        if not has_depth:
-            for key in ("intrinsics", "camera_pose", "depth_scale", "stride"):
-                if key in entry:
-                    self.fail(at(key), "only for a depth image ('depth')")
+        for key in _DEPTH_FIELDS if not has_depth else ("k",):
+            if key in entry:
+                what = (
+                    "a depth image ('depth')"
+                    if not has_depth
+                    else "a point file ('path'): a depth image's normals come from its pixel grid"
+                )
+                self.fail(at(key), f"only for {what}")
         k = DEFAULT_K
         if "k" in entry:
             k = entry["k"]
@@ -327,35 +339,25 @@ class _Reader:
         viewpoint = self.vector(entry["viewpoint"], at("viewpoint"), dim) if "viewpoint" in entry else None
 
         if has_depth:
-            if dim != 3:
-                self.fail(at("depth"), f"depth images need a 3D scene (dim is {dim})")
-            path = self.file_path(entry["depth"], at("depth"), DEPTH_FILE_SUFFIXES)
-            points, camera = self.depth_points(entry, path, where)
-            if viewpoint is None:
-                viewpoint = camera
-            normals = None
-            name = path.name
-        else:
-            path = self.file_path(entry["path"], at("path"), POINT_FILE_SUFFIXES)
-            try:
-                points, normals = read_point_file(path)
-            except CloudError as exc:
-                self.fail(at("path"), str(exc))
-            points, normals = self.fit_dimension(points, normals, path.name, at("path"), dim)
-            name = path.name
-        field_name = at("depth" if has_depth else "path")
+            return self.depth_obstacle(entry, where, dim, viewpoint)
+        path = self.file_path(entry["path"], at("path"), POINT_FILE_SUFFIXES)
+        try:
+            points, normals = read_point_file(path)
+        except CloudError as exc:
+            self.fail(at("path"), str(exc))
+        points, normals = self.fit_dimension(points, normals, path.name, at("path"), dim)
         try:
             if normals is None:
                 if len(points) < dim + 1:
                     self.fail(
-                        field_name,
-                        f"{name!r} holds {len(points)} points: too few to estimate normals (give normals in the file)",
+                        at("path"),
+                        f"{path.name!r} holds {_count(len(points), 'point')}: too few to estimate normals (give normals in the file)",
                     )
                 normals = estimate_normals(points, k=k, viewpoint=viewpoint)
             else:
-                normals = check_normals(normals, name)
+                normals = check_normals(normals, path.name)
         except CloudError as exc:
-            self.fail(field_name, str(exc))
+            self.fail(at("path"), str(exc))
         return PointCloud(points=points, normals=normals, source=path)
 
     def fit_dimension(
@@ -378,8 +380,21 @@ class _Reader:
             return points[:, :2], None if normals is None else normals[:, :2]
         self.fail(where, f"points file {name!r} holds {c}D points but the scene is {dim}D")
 
-    def depth_points(self, entry: dict[str, Any], path: Path, where: str) -> tuple[Array, Array]:
-        """World points of a depth-image obstacle and the camera position."""
+    def depth_obstacle(self, entry: dict[str, Any], where: str, dim: int, viewpoint: Array | None) -> PointCloud:
+        """A ``points`` obstacle of a depth image: normals towards the camera, or towards
+        ``viewpoint`` when one is given."""
+        at = lambda key: _join(where, key)
+        if dim != 3:
+            self.fail(at("depth"), f"depth images need a 3D scene (dim is {dim})")
+        path = self.file_path(entry["depth"], at("depth"), DEPTH_FILE_SUFFIXES)
+        points, normals = self.depth_cloud(entry, path, where)
+        if viewpoint is not None:
+            away = np.einsum("pi,pi->p", normals, viewpoint - points) < 0
+            normals = np.where(away[:, None], -normals, normals)
+        return PointCloud(points=points, normals=normals, source=path)
+
+    def depth_cloud(self, entry: dict[str, Any], path: Path, where: str) -> tuple[Array, Array]:
+        """World points and normals of a depth-image obstacle."""
         at = lambda key: _join(where, key)
         intr = self.obj(self.get(entry, "intrinsics", where), at("intrinsics"))
         self.only(intr, ("fx", "fy", "cx", "cy"), at("intrinsics"), "intrinsics")
@@ -398,22 +413,14 @@ class _Reader:
                 pose[:3, 3] = self.vector(cam["position"], _join(at("camera_pose"), "position"), 3)
             if "quaternion" in cam:
                 pose[:3, :3] = self.quaternion(cam["quaternion"], _join(at("camera_pose"), "quaternion"))
-        scale = self.number(entry["depth_scale"], at("depth_scale"), positive=True) if "depth_scale" in entry else 1.0
+        scale = self.number(entry["depth_scale"], at("depth_scale"), positive=True) if "depth_scale" in entry else None
         stride = entry.get("stride", 1)
         if not isinstance(stride, int) or isinstance(stride, bool) or stride < 1:
             self.fail(at("stride"), f"expected a positive integer, got {_show(stride)}")
         try:
-            depth = read_depth_image(path)
+            return read_depth_cloud(path, (fx, fy, cx, cy), pose, depth_scale=scale, stride=stride)
         except CloudError as exc:
             self.fail(at("depth"), str(exc))
-        # every stride-th pixel, with the principal point moved to match
-        depth = depth[::stride, ::stride]
-        points = depth_to_points(
-            depth, fx / stride, fy / stride, cx / stride, cy / stride, pose=pose, depth_scale=scale
-        )
-        if len(points) == 0:
-            self.fail(at("depth"), f"depth image {path.name!r} has no pixel with a positive depth")
-        return points, pose[:3, 3].copy()
 
     def mesh_file(self, path: Path, where: str) -> tuple[Array, NDArray[np.int64]]:
         try:
@@ -423,7 +430,7 @@ class _Reader:
         try:
             mesh = trimesh.load(str(path), force="mesh", process=False)
         except Exception as exc:  # trimesh raises many kinds of errors on bad files
-            self.fail(where, f"cannot load mesh {path.name!r}: {exc}")
+            self.fail(where, f"cannot load mesh {path.name!r}: {one_line(exc)}")
         vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), np.float64)
         faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), np.int64)
         if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
@@ -534,6 +541,51 @@ def load_points_scene(
     if viewpoint is not None:
         entry["viewpoint"] = [float(x) for x in viewpoint]
     cloud = reader.points_obstacle(entry, "", dim)
+    return _cloud_scene(cloud, name, bounds, pad, include)
+
+
+def load_depth_scene(
+    path: str | os.PathLike[str],
+    intrinsics: Sequence[float] | np.ndarray,
+    pose: Sequence[float] | np.ndarray | None = None,
+    depth_scale: float | None = None,
+    bounds: tuple[Sequence[float] | np.ndarray, Sequence[float] | np.ndarray] | None = None,
+    pad: float = 0.1,
+    include: Sequence[Sequence[float] | np.ndarray] = (),
+    stride: int = 1,
+) -> Scene:
+    """A 3D scene made of the points of one depth image (``.png``, ``.tif``, ``.npy``),
+    with normals from its pixel grid: see
+    :func:`~pointplan.geometry.clouds.read_depth_cloud` for ``intrinsics`` (``fx, fy, cx,
+    cy``), ``pose`` (the camera in the world: ``x, y, z, qx, qy, qz, qw`` or a 4 x 4
+    matrix), ``depth_scale`` and ``stride``.
+
+    Without ``bounds`` (``(low, high)``) the workspace is the box around the points, the
+    camera and the positions in ``include``, grown by ``pad`` times its largest side.
+    Errors are :class:`SceneFormatError` naming the file.
+    """
+    path = Path(path)
+    name = str(path)
+    if not path.is_file():
+        raise SceneFormatError(name, "", "file not found")
+    try:
+        camera = np.zeros(3) if pose is None else camera_pose(pose)[:3, 3]
+        points, normals = read_depth_cloud(path, intrinsics, pose, depth_scale=depth_scale, stride=stride)
+    except CloudError as exc:
+        raise SceneFormatError(name, "", str(exc)) from None
+    cloud = PointCloud(points=points, normals=normals, source=path)
+    return _cloud_scene(cloud, name, bounds, pad, [*include, camera])
+
+
+def _cloud_scene(
+    cloud: PointCloud,
+    name: str,
+    bounds: tuple[Sequence[float] | np.ndarray, Sequence[float] | np.ndarray] | None,
+    pad: float,
+    include: Sequence[Sequence[float] | np.ndarray],
+) -> Scene:
+    """A scene of one cloud in ``bounds``, or in the padded box of the cloud and ``include``."""
+    dim = cloud.points.shape[1]
     if bounds is None:
         extra = [np.asarray(q, np.float64).reshape(-1)[:dim] for q in include if np.asarray(q).size >= dim]
         box = np.concatenate([cloud.points, np.reshape(extra, (-1, dim))])
@@ -548,7 +600,7 @@ def load_points_scene(
                 "bounds",
                 f"expected {dim} numbers low and high with low < high, got {low.tolist()} and {high.tolist()}",
             )
-    return Scene(obstacles=[cloud], low=low, high=high, name=path.stem)
+    return Scene(obstacles=[cloud], low=low, high=high, name=Path(name).stem)
 
 
 # ============================================================================ enclosed regions

@@ -162,3 +162,5 @@ VARIANT_SCENARIOS: dict[str, type[Scenario]] = {
     "narrow2dnarrow": Narrow2DNarrowGaps,
     "narrow2dmanynarrow": Narrow2DManyNarrow,
 }
+#: the names users type, by registry key (``narrow2dends`` -> ``narrow2d-ends``)
+VARIANT_NAMES: dict[str, str] = {f"narrow2d{v}": f"narrow2d-{v}" for v in VARIANTS}

@@ -9,7 +9,7 @@ from ..robots.base import Robot
 from .base import Scenario
 from .mbm import MBM_SCENARIOS
 from .mbm import SCENARIOS as MBM_NAMES
-from .narrow2d_variants import VARIANT_SCENARIOS
+from .narrow2d_variants import VARIANT_NAMES, VARIANT_SCENARIOS
 from .scenes2d import Empty2DScenario, Narrow2DScenario
 from .scenes3d import SCENARIOS_3D
 
@@ -18,8 +18,9 @@ SCENARIOS: dict[str, type[Scenario]] = {"narrow2d": Narrow2DScenario, "empty2d":
 
 
 def scenario_names() -> list[str]:
-    """Every name :func:`make_scenario` knows."""
-    return list(SCENARIOS) + list(SCENARIOS_3D) + [f"mbm-{s}" for s in MBM_NAMES]
+    """Every name :func:`make_scenario` knows, as users type it (``narrow2d-ends``; the
+    spellings :func:`scenario_key` maps to the same key, ``narrow2dends``, work too)."""
+    return [VARIANT_NAMES.get(k, k) for k in SCENARIOS] + list(SCENARIOS_3D) + [f"mbm-{s}" for s in MBM_NAMES]
 
 
 def scenario_key(name: str) -> str:
