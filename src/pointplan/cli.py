@@ -644,8 +644,13 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.output:
         _draw_plan(args, scenario.robot, problems[: len(report.records)], report.records, planner)
     if args.json:
-        paths = [{**r.to_json(), "path": np.asarray(r.path).tolist()} for r in report.records]
-        out: dict[str, Any] = {"planner": args.planner, "metrics": report.metrics(), "problems": paths}
+        paths = _exported_paths(scenario.robot, problems, report.records, args.waypoints)
+        out: dict[str, Any] = {
+            "planner": args.planner,
+            **_interpolation_note(scenario.robot, args.waypoints),
+            "metrics": report.metrics(),
+            "problems": paths,
+        }
         if report.interrupted:
             out["interrupted"] = {"finished": report.interrupted[0], "problems": report.interrupted[1]}
         _write_json(args.json, out)
@@ -653,6 +658,42 @@ def cmd_plan(args: argparse.Namespace) -> int:
         return 130
     ok = all(check_path(scenario.robot, p, r.path) for p, r in zip(problems, report.records) if r.success)
     return 0 if ok else 1
+
+
+def _interpolation_note(robot: Robot, waypoints: str) -> dict[str, str]:
+    """What the written paths mean: how consecutive configurations are joined, and the
+    configuration's layout."""
+    if robot.euclidean:
+        how = "linear: consecutive configurations are joined by straight lines in configuration space"
+    elif waypoints == "linear-slerp":
+        how = (
+            "linear + slerp: position linearly, orientation by spherical linear interpolation (every edge is also "
+            "free as a screw motion)"
+        )
+    else:
+        how = "screw: q0 exp(s log(q0^-1 q1)), rotation and translation coupled (--waypoints linear-slerp for OMPL/MoveIt)"
+    layout = "joint positions in the URDF's order" if getattr(robot, "urdf", None) else "x, y[, z]"
+    if not robot.euclidean:
+        layout = "x, y, z, qx, qy, qz, qw (quaternion scalar last, as ROS, OMPL and scipy)"
+    return {"interpolation": how, "configuration": layout}
+
+
+def _exported_paths(
+    robot: Robot, problems: Sequence[Problem], records: Sequence[EpisodeRecord], waypoints: str
+) -> list[dict[str, Any]]:
+    """Per problem, the record with its path, split for linear + slerp when asked."""
+    from .evaluation.interpolation import for_linear_slerp
+
+    out = []
+    for p, r in zip(problems, records, strict=False):
+        path = np.asarray(r.path, np.float64)
+        if waypoints == "linear-slerp" and r.success and len(path) > 1:
+            try:
+                path = for_linear_slerp(robot, p, path)
+            except ValueError as e:
+                raise CLIError(f"{r.tag or 'a problem'}: {e}") from None
+        out.append({**r.to_json(), "path": path.tolist()})
+    return out
 
 
 def _draw_plan(
@@ -1588,6 +1629,15 @@ def _add_plan_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--bounds",
         help="with --points or --depth: the workspace as low then high, e.g. 0,0,1,1; write --bounds=-1,... when the first number is negative (default: the box of the cloud, --start and --goal (and --depth's camera) grown by 10%% of its largest side)",
+    )
+    p.add_argument(
+        "--waypoints",
+        choices=("as-planned", "linear-slerp"),
+        default="as-planned",
+        help="the paths written by --json: as planned (each edge free as the robot's own motion: a straight line for "
+        "the disc, the sphere and arms, a screw motion for the S-shape), or linear-slerp (S-shape edges split until "
+        "each is free also with its position interpolated linearly and its rotation by slerp, as OMPL's SE(3) space "
+        "and MoveIt follow them) (default: %(default)s)",
     )
     p.add_argument("--start", help="plan this start (with --goal) instead of the scene's problems, e.g. 0.1,0.1")
     p.add_argument("--goal", help="the goal of --start, e.g. 0.9,0.9 (an S-shape takes x,y,z or x,y,z,qx,qy,qz,qw)")
