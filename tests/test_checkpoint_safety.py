@@ -347,3 +347,41 @@ def test_only_the_conversion_unpickles() -> None:
             hits[py.relative_to(SRC).as_posix()] = found
     assert list(hits) == ["pointplan/models/convert.py"], hits
     assert all("weights_only=False" in line for line in hits["pointplan/models/convert.py"])
+
+
+# ------------------------------------------------------------------ the MPNet and sampler loaders
+def _shipped_and_loader(kind: str) -> tuple[Path, Any]:
+    """The shipped checkpoint of ``kind`` and the loader the planners use for it."""
+    from pointplan.models.mpnet import MPNet, shipped_mpnet
+    from pointplan.planners.learned_sampling import LearnedSampler, shipped_sampler
+
+    if kind == "mpnet":
+        return shipped_mpnet("disc2d"), MPNet.from_checkpoint
+    return shipped_sampler("disc2d"), lambda path: LearnedSampler(path, Disc2D(), 0.5)
+
+
+@pytest.mark.parametrize(
+    ("kind", "weights", "name", "what"),
+    [
+        ("mpnet", "model", "pnet.3.weight", "the MPNet's weights"),
+        ("sampler", "weights", "cvae.decoder.2.weight", "the sampler network's weights"),
+    ],
+)
+def test_mpnet_and_sampler_checkpoints_with_wrong_weights_are_refused_in_one_line(
+    tmp_path: Path, kind: str, weights: str, name: str, what: str
+) -> None:
+    shipped, load = _shipped_and_loader(kind)
+    load(shipped)  # the shipped one loads
+    data = load_checkpoint(shipped)
+    missing = {**data, weights: {k: v for k, v in data[weights].items() if k != name}}
+    wrong = {**data, weights: {**data[weights], name: torch.zeros(3, 5)}}
+    for label, payload, expected in (
+        ("missing.pt", missing, f"{what} do not match its settings (missing {name!r})"),
+        ("wrong.pt", wrong, f"{what} do not match its settings ({name}: (3, 5), expected "),
+    ):
+        path = tmp_path / label
+        save_checkpoint(path, {k: v for k, v in payload.items() if k not in ("format", "version")})
+        with _one_line_error("do not match its settings") as info:
+            load(path)
+        message = str(info.value)
+        assert "\n" not in message and message.startswith(f"{path}: ") and expected in message, message

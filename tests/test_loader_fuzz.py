@@ -1,11 +1,14 @@
 """Seeded fuzzing of the loaders of a user's own data.
 
 Valid sample files (a scene file, PLY in ASCII and binary, PCD, ``.npy`` and ``.xyz``
-clouds, depth images as ``.npy`` and 16-bit PNG, a shipped policy checkpoint) are mutated
-(bytes flipped, files cut short, bytes inserted or repeated, headers and JSON documents
-edited) and fed to the public loaders: :func:`~pointplan.scenes.io.load_scene`,
-:func:`~pointplan.scenes.io.load_points_scene`, :func:`~pointplan.scenes.io.load_depth_scene`
-and :meth:`~pointplan.models.policy.Policy.from_checkpoint`. Each case must load or raise
+clouds, depth images as ``.npy`` and 16-bit PNG, the shipped policy, MPNet and
+learned-sampling checkpoints) are mutated (bytes flipped, files cut short, bytes inserted or
+repeated, headers, JSON documents and checkpoint contents edited) and fed to the public
+loaders: :func:`~pointplan.scenes.io.load_scene`,
+:func:`~pointplan.scenes.io.load_points_scene`, :func:`~pointplan.scenes.io.load_depth_scene`,
+:meth:`~pointplan.models.policy.Policy.from_checkpoint` and the ``mpnet-nr`` and
+``lsample-0.5`` planners (:func:`~pointplan.planners.make_planner`, as the CLI loads their
+checkpoints). Each case must load or raise
 the loader's own error (:class:`SceneFormatError`, :class:`CheckpointError`) with a
 one-line message, within a time limit; anything else fails the test, listing the cases.
 ``pytest -s`` shows the counts.
@@ -328,7 +331,7 @@ def test_scene_files(folder: Path) -> None:
 
     def cases() -> Iterator[Mutation]:
         text = json.dumps(base, indent=1).encode()
-        for i in range(900):
+        for i in range(800):
             if i % 4 == 3:
                 yield byte_mutation(text, rng)
                 continue
@@ -389,12 +392,42 @@ def test_depth_images(tmp_path: Path, kind: str) -> None:
     run_cases(f"depth {kind}", path, byte_cases(data, 400, seed=7 + len(kind), edit=edit), load, (SceneFormatError,))
 
 
-def checkpoint_edit(data: dict[str, Any], rng: np.random.Generator) -> str:
-    """Edit a loaded checkpoint in place: drop or replace a value at the top, in the
-    network settings or among the weights."""
+POOL: list[Any] = [None, -1, 0, 3, 2.5, "x", "disc2d", "sshape", "global", [], {}, [64], [64, 4, 2], [1, 1]]
+#: more values for the MPNet and sampler checkpoints: their other names, huge and
+#: non-finite numbers, positions
+MORE: list[Any] = [*POOL, "sphere3d", "surface-normals", "mpnet", "lsample-cvae", "world", "start-goal", True]
+MORE += [1.0, 0.99, 10**9, 10**400, 2**63, 1e-300, math.nan, math.inf, -math.inf, ["0", "1"]]
+MORE += [[0.5, 0.5], [0.0, 0.0, 0.0], [math.nan, 0.5], [[0.5, 0.5]], [1.0, 0.0]]
+
+
+def weights_edit(weights: dict[str, Any], key: str, rng: np.random.Generator) -> str:
+    """Replace a weight by one of another shape, of its shape in another dtype, or by non-finite values."""
     import torch
 
-    where = str(rng.choice(["top", "net", "actor"]))
+    dtypes = [torch.int64, torch.bool, torch.complex64, torch.float16, torch.float64, torch.uint8]
+    op = int(rng.integers(3))
+    w = weights[key]
+    if op == 0 or not isinstance(w, torch.Tensor):
+        shape = tuple(int(x) for x in rng.integers(0, 5, int(rng.integers(0, 3))))
+        weights[key] = torch.zeros(shape)
+        return f"zeros {shape}"
+    if op == 1:
+        dtype = dtypes[int(rng.integers(len(dtypes)))]
+        weights[key] = torch.zeros(w.shape, dtype=dtype)
+        return f"zeros {tuple(w.shape)} of {dtype}"
+    weights[key] = torch.full(w.shape, float(rng.choice([math.nan, math.inf, 1e30])))
+    return f"{tuple(w.shape)} of {weights[key].reshape(-1)[:1].item()}"
+
+
+def checkpoint_edit(
+    data: dict[str, Any], rng: np.random.Generator, parts: tuple[str, str] = ("net", "actor"), more: bool = False
+) -> str:
+    """Edit a loaded checkpoint in place: drop or replace a value at the top, in the
+    network settings or among the weights (``parts``: their keys); ``more``: from a larger
+    pool of values, and weights of other dtypes and non-finite ones too."""
+    import torch
+
+    where = str(rng.choice(["top", *parts]))
     target = data.get(where) if where != "top" else data
     if not isinstance(target, dict) or not target:  # gone in an earlier edit
         where, target = "top", data
@@ -403,38 +436,71 @@ def checkpoint_edit(data: dict[str, Any], rng: np.random.Generator) -> str:
     if op == 0:
         del target[key]
         return f"delete {where}/{key}"
-    if where == "actor" and op == 1:
+    if where == parts[1] and op == 1:
+        if more:
+            return f"{where}/{key} -> {weights_edit(target, key, rng)}"
         shape = tuple(int(x) for x in rng.integers(0, 5, int(rng.integers(0, 3))))
         target[key] = torch.zeros(shape)
         return f"{where}/{key} -> zeros {shape}"
-    pool: list[Any] = [None, -1, 0, 3, 2.5, "x", "disc2d", "sshape", "global", [], {}, [64], [64, 4, 2], [1, 1]]
+    pool = MORE if more else POOL
     value = copy.deepcopy(pool[int(rng.integers(len(pool)))])
     target[key] = value
     return f"{where}/{key} -> {value!r}"
 
 
-def test_policy_checkpoints(tmp_path: Path) -> None:
+def checkpoint_cases(
+    source: Path,
+    path: Path,
+    n: int,
+    seed: int,
+    parts: tuple[str, str] = ("net", "actor"),
+    more: bool = False,
+    edited: int = 3,
+) -> Iterator[Mutation]:
+    """``n`` mutations of the checkpoint ``source``: one in ``edited`` its contents edited
+    (:func:`checkpoint_edit`, written to ``path``), the others its bytes."""
     import torch
 
+    original = torch.load(source, weights_only=True)
+    raw = source.read_bytes()
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        if i % edited == 0:
+            data = copy.deepcopy(original)
+            what = "; ".join(checkpoint_edit(data, rng, parts, more) for _ in range(int(rng.integers(1, 3))))
+            torch.save(data, path)
+            yield path.read_bytes(), what
+        else:
+            yield byte_mutation(raw, rng)
+
+
+def test_policy_checkpoints(tmp_path: Path) -> None:
     from pointplan.models.policy import Policy
 
-    source = DATA / "narrow2d_policy.pt"
-    original = torch.load(source, weights_only=True)
     path = tmp_path / "fuzz.pt"
-    rng = np.random.default_rng(11)
+    cases = checkpoint_cases(DATA / "narrow2d_policy.pt", path, 450, seed=11)
+    run_cases("policy checkpoint", path, cases, Policy.from_checkpoint, (CheckpointError,))
 
-    def cases() -> Iterator[Mutation]:
-        raw = source.read_bytes()
-        for i in range(450):
-            if i % 3 == 0:
-                data = copy.deepcopy(original)
-                what = "; ".join(checkpoint_edit(data, rng) for _ in range(int(rng.integers(1, 3))))
-                torch.save(data, path)
-                yield path.read_bytes(), what
-            else:
-                yield byte_mutation(raw, rng)
 
-    run_cases("policy checkpoint", path, cases(), Policy.from_checkpoint, (CheckpointError,))
+@pytest.mark.parametrize(
+    ("planner", "source", "parts"),
+    [
+        ("mpnet-nr", "narrow2d_mpnet.pt", ("net", "model")),
+        ("lsample-0.5", "narrow2d_lsample_cvae.pt", ("cvae", "weights")),
+    ],
+)
+def test_mpnet_and_sampler_checkpoints(tmp_path: Path, planner: str, source: str, parts: tuple[str, str]) -> None:
+    """Loaded as the CLI loads them: through the planner's factory, with a checkpoint."""
+    from pointplan.planners import make_planner
+    from pointplan.robots import Disc2D
+
+    def load(p: Path) -> object:
+        return make_planner(planner, Disc2D(), checkpoint=str(p))
+
+    path = tmp_path / "fuzz.pt"
+    load(DATA / source)
+    cases = checkpoint_cases(DATA / source, path, 300, zlib.crc32(source.encode()), parts, more=True, edited=2)
+    run_cases(f"{planner} checkpoint", path, cases, load, (CheckpointError,))
 
 
 # ---------------------------------------------------------------------------- what the fuzz found
@@ -489,3 +555,58 @@ def test_a_policy_checkpoint_with_bad_contents_is_refused_in_one_line(
     with pytest.raises(CheckpointError) as e:
         Policy.from_checkpoint(tmp_path / "bad.pt")
     assert message in str(e.value) and "\n" not in str(e.value)
+
+
+def _lsample(path: Path) -> object:
+    from pointplan.planners.learned_sampling import LearnedSampler
+    from pointplan.robots import Disc2D
+
+    return LearnedSampler(path, Disc2D(), 0.5)
+
+
+def _mpnet(path: Path) -> object:
+    from pointplan.models.mpnet import MPNet
+
+    return MPNet.from_checkpoint(path)
+
+
+@pytest.mark.parametrize(
+    ("load", "source", "edit", "message"),
+    [
+        (_mpnet, "narrow2d_mpnet.pt", lambda d: d.pop("robot"), "not an MPNet checkpoint (it has no 'robot')"),
+        (_mpnet, "narrow2d_mpnet.pt", lambda d: d["net"].update(width="x"), "width must be an integer from 1 to"),
+        (_mpnet, "narrow2d_mpnet.pt", lambda d: d["net"].update(layers=2**63), "layers must be an integer from 0 to"),
+        (_mpnet, "narrow2d_mpnet.pt", lambda d: d["net"].update(dropout=1.0), "dropout must be a number from 0"),
+        (_mpnet, "narrow2d_mpnet.pt", lambda d: d["net"].update(foo=1), "(ValueError: unknown MPNetNetConfig settings"),
+        (_mpnet, "narrow2d_mpnet.pt", lambda d: d.update(center=[[0.5, 0.5]]), "center must be 2 numbers"),
+        (_mpnet, "narrow2d_mpnet.pt", lambda d: d.update(step=math.nan), "step must be a positive number"),
+        (_mpnet, "narrow2d_mpnet.pt", lambda d: d.update(observation=-1), "its observation must be"),
+        (_mpnet, "narrow2d_mpnet.pt", lambda d: d.update(robot="sshape"), "MPNet plans translating robots only"),
+        (_mpnet, "narrow2d_mpnet.pt", lambda d: d.update(point_features=3), "point_features must be 4"),
+        (_mpnet, "narrow2d_mpnet.pt", lambda d: d["model"]["pnet.9.bias"].fill_(math.nan), "not finite"),
+        (_lsample, "narrow2d_lsample_cvae.pt", lambda d: d.update(weights=1.0), "weights are float, not a state dict"),
+        (_lsample, "narrow2d_lsample_cvae.pt", lambda d: d["cvae"].update(frame=[0]), "frame must be 'world' or"),
+        (_lsample, "narrow2d_lsample_cvae.pt", lambda d: d["cvae"].update(min_half=[1]), "min_half must be a positive"),
+        (_lsample, "narrow2d_lsample_cvae.pt", lambda d: d.update(high=0.99), "low and high must be 2 numbers each"),
+        (_lsample, "narrow2d_lsample_cvae.pt", lambda d: d.update(low=[1.0, 0.0]), "low must be below high"),
+        (_lsample, "narrow2d_lsample_cvae.pt", lambda d: d.pop("spacing"), "it has no 'spacing'"),
+        (_lsample, "narrow2d_lsample_cvae.pt", lambda d: d.update(robot=[1, 1]), "was trained for robot [1, 1]"),
+        (
+            _lsample,
+            "narrow2d_lsample_cvae.pt",
+            lambda d: d["weights"].update({"cvae.decoder.4.bias": d["weights"]["cvae.decoder.4.bias"].long()}),
+            "cvae.decoder.4.bias holds torch.int64 values, not floating point numbers",
+        ),
+    ],
+)
+def test_an_mpnet_or_sampler_checkpoint_with_bad_contents_is_refused_in_one_line(
+    tmp_path: Path, load: Callable[[Path], object], source: str, edit: Callable[[dict[str, Any]], object], message: str
+) -> None:
+    import torch
+
+    data = torch.load(DATA / source, weights_only=True)
+    edit(data)
+    torch.save(data, tmp_path / "bad.pt")
+    with pytest.raises(CheckpointError) as e:
+        load(tmp_path / "bad.pt")
+    assert message in str(e.value) and "\n" not in str(e.value) and "bad.pt" in str(e.value)

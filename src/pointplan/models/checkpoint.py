@@ -18,6 +18,7 @@ are; older files holding pickled objects are refused, naming ``pointplan convert
 from __future__ import annotations
 
 import dataclasses
+import math
 import pickle
 import re
 import zipfile
@@ -159,6 +160,52 @@ def check_weights(path: str | Path, expected: dict[str, Any], weights: Any, what
             raise CheckpointError(
                 f"{path}: the {what}'s weights do not match its settings ({k}: {got}, expected {tuple(v.shape)})"
             )
+
+
+#: the widest layer and the most layers a checkpoint's network settings may ask for
+#: (:func:`check_sizes`, before anything is built)
+MAX_WIDTH = 1 << 16
+MAX_LAYERS = 256
+
+
+def short_repr(value: Any, limit: int = 60) -> str:
+    """``repr(value)``, cut to ``limit`` characters (for messages about a file's contents)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def finite_number(value: Any) -> bool:
+    """Whether ``value`` is an ``int`` or ``float`` (not a ``bool``) that is finite as a float."""
+    if type(value) not in (int, float):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:  # an int too large for a float
+        return False
+
+
+def check_sizes(path: str | Path, settings: Any, widths: tuple[str, ...], counts: tuple[str, ...], what: str) -> None:
+    """Refuse network ``settings`` (a dataclass read from ``path``) unless its fields
+    ``widths`` are integers from 1 to :data:`MAX_WIDTH` and its fields ``counts`` (of
+    layers) integers from 0 to :data:`MAX_LAYERS`: checked before a network is built, even
+    on the ``meta`` device, which would still make a module per layer."""
+    for names, low, high in ((widths, 1, MAX_WIDTH), (counts, 0, MAX_LAYERS)):
+        for name in names:
+            value = getattr(settings, name)
+            if type(value) is not int or not low <= value <= high:
+                raise CheckpointError(
+                    f"{path}: the {what}'s {name} must be an integer from {low} to {high}, got {short_repr(value)}"
+                )
+
+
+def check_finite_weights(path: str | Path, weights: dict[str, Any], what: str = "network") -> None:
+    """Refuse weights (tensors, already checked by :func:`check_weights`) that are not
+    floating point numbers, or not finite."""
+    for k, w in weights.items():
+        if not w.is_floating_point():
+            raise CheckpointError(f"{path}: the {what}'s weight {k} holds {w.dtype} values, not floating point numbers")
+        if not bool(torch.isfinite(w).all()):
+            raise CheckpointError(f"{path}: the {what}'s weight {k} holds values that are not finite (nan or inf)")
 
 
 def _read_data_only(path: Path, device: str) -> Any:

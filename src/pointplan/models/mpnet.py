@@ -35,7 +35,17 @@ from torch import nn
 from ..config import from_dict
 from ..robots import make_robot
 from ..robots.base import Robot
-from .checkpoint import CheckpointError, load_checkpoint, to_dict
+from .checkpoint import (
+    CheckpointError,
+    check_finite_weights,
+    check_sizes,
+    check_weights,
+    finite_number,
+    load_checkpoint,
+    rebuilding,
+    short_repr,
+    to_dict,
+)
 from .encoders import PointNetEncoder
 
 #: what ``kind`` an MPNet checkpoint says it holds
@@ -46,6 +56,8 @@ OBSERVATION = "surface-normals"
 OBSERVATION_3D = "global"
 #: surface points per workspace in 3D (the global observer's pool size)
 N_POINTS_3D = 512
+#: the most surface points per workspace a checkpoint may ask for
+MAX_POINTS = 1 << 20
 #: MPNet checkpoints that ship inside the package: robot -> file in ``pointplan/data``
 SHIPPED_MPNET: dict[str, str] = {"disc2d": "narrow2d_mpnet.pt", "sphere3d": "boxes3d_sphere_mpnet.pt"}
 
@@ -197,13 +209,23 @@ class MPNet:
 
     @classmethod
     def from_checkpoint(cls, path: str | Path) -> MPNet:
+        """The MPNet of a checkpoint. Anything wrong with the file or its contents raises
+        a one-line :class:`~pointplan.models.checkpoint.CheckpointError`."""
         data = load_checkpoint(path)
         if data.get("kind") != KIND:
             raise CheckpointError(f"{path}: not an MPNet checkpoint (train one with `pointplan mpnet-train`)")
-        robot = make_robot(data["robot"])
-        cfg = from_dict(MPNetNetConfig, data["net"])
-        model = MPNetModel(robot.dim, int(data["point_features"]), cfg)
-        model.load_state_dict(data["model"])
+        with rebuilding(path, "MPNet"):
+            _check_mpnet_fields(data, path)
+            robot = make_robot(data["robot"])
+            check_translating(robot)
+            cfg = from_dict(MPNetNetConfig, data["net"])
+            _check_mpnet_settings(data, path, robot, cfg)
+            with torch.device("meta"):  # the shapes of the weights, allocating nothing
+                expected = MPNetModel(robot.dim, 2 * robot.dim, cfg).state_dict()
+            check_weights(path, expected, data["model"], "MPNet")
+            check_finite_weights(path, data["model"], "MPNet")
+            model = MPNetModel(robot.dim, 2 * robot.dim, cfg)
+            model.load_state_dict(data["model"])
         meta = {k: v for k, v in data.items() if k != "model"}
         observation = str(data.get("observation", default_observation(robot)))
         n_points = int(data.get("n_points", N_POINTS_3D if observation == OBSERVATION_3D else 0))
@@ -215,6 +237,47 @@ class MPNet:
             meta,
             observation,
             n_points,
+        )
+
+
+def _check_mpnet_fields(data: dict[str, Any], path: str | Path) -> None:
+    """The fields of an MPNet checkpoint that loading it reads, as far as they can be
+    checked before its robot is known."""
+    for key in ("robot", "point_features", "net", "model", "center", "step"):
+        if key not in data:
+            raise CheckpointError(f"{path}: not an MPNet checkpoint (it has no {key!r})")
+    if not isinstance(data["robot"], str):
+        raise CheckpointError(f"{path}: its robot must be a name (a string), got {short_repr(data['robot'])}")
+    if not isinstance(data["net"], dict):
+        raise CheckpointError(f"{path}: net must hold the network's settings, got {type(data['net']).__name__}")
+    observation = data.get("observation", OBSERVATION)
+    if observation not in (OBSERVATION, OBSERVATION_3D):
+        raise CheckpointError(
+            f"{path}: its observation must be {OBSERVATION!r} or {OBSERVATION_3D!r}, got {short_repr(observation)}"
+        )
+    n_points = data.get("n_points", 0)
+    if type(n_points) is not int or not 0 <= n_points <= MAX_POINTS:
+        raise CheckpointError(f"{path}: n_points must be an integer from 0 to {MAX_POINTS}, got {short_repr(n_points)}")
+    step = data["step"]
+    if not finite_number(step) or step <= 0:
+        raise CheckpointError(f"{path}: step must be a positive number, got {short_repr(step)}")
+
+
+def _check_mpnet_settings(data: dict[str, Any], path: str | Path, robot: Robot, cfg: MPNetNetConfig) -> None:
+    """What an MPNet checkpoint's robot and network settings decide: the size of the
+    points' features and of the centre, and the network's sizes and dropout."""
+    features = data["point_features"]
+    if type(features) is not int or features != 2 * robot.dim:
+        raise CheckpointError(
+            f"{path}: point_features must be {2 * robot.dim} (position and normal in {robot.dim}D), got {short_repr(features)}"
+        )
+    center = data["center"]
+    if not isinstance(center, (list, tuple)) or len(center) != robot.dim or not all(map(finite_number, center)):
+        raise CheckpointError(f"{path}: center must be {robot.dim} numbers, got {short_repr(center)}")
+    check_sizes(path, cfg, ("encoder_width", "width"), ("encoder_layers", "layers"), "MPNet")
+    if not finite_number(cfg.dropout) or not 0.0 <= cfg.dropout < 1.0:
+        raise CheckpointError(
+            f"{path}: the MPNet's dropout must be a number from 0 to below 1, got {short_repr(cfg.dropout)}"
         )
 
 

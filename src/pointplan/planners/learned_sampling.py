@@ -23,11 +23,13 @@ import numpy as np
 
 from ..robots.base import Robot
 from ..scenes.scene import Problem
-from .base import PlanResult
+from .base import Array, PlanResult
 from .birrt import BiRRT, DrawSamples
 
 if TYPE_CHECKING:
     import torch
+
+    from ..models.cvae import CVAEConfig, LearnedSamplerNet
 
     #: the network's condition for a problem, with the problem's normalised start and goal
     Condition = tuple[torch.Tensor, torch.Tensor, torch.Tensor]
@@ -53,6 +55,75 @@ def shipped_sampler(robot: str = "disc2d") -> Path:
     return path
 
 
+def load_sampler(checkpoint: str | Path, robot: Robot) -> tuple[CVAEConfig, LearnedSamplerNet, Array, Array, float]:
+    """The network of a sampler checkpoint for ``robot`` (in eval mode), its settings, the
+    bounds it normalises positions by (``low``, ``high``) and the spacing of the scene
+    points it reads. Anything wrong with the file or its contents raises a one-line
+    :class:`~pointplan.models.checkpoint.CheckpointError`."""
+    import torch
+
+    from ..config import from_dict
+    from ..models.checkpoint import CheckpointError, check_finite_weights, check_weights, load_checkpoint, rebuilding
+    from ..models.cvae import CVAEConfig, LearnedSamplerNet
+
+    data = load_checkpoint(checkpoint)
+    if data.get("kind") != CHECKPOINT_KIND:
+        raise CheckpointError(
+            f"{checkpoint}: not a learned-sampling network (train one with `pointplan lsample-train`)"
+        )
+    with rebuilding(checkpoint, "learned-sampling"):
+        _check_sampler_fields(data, checkpoint, robot)
+        config = from_dict(CVAEConfig, data["cvae"])
+        _check_sampler_settings(config, checkpoint)
+        with torch.device("meta"):  # the shapes of the weights, allocating nothing
+            expected = LearnedSamplerNet(config, robot.dim).state_dict()
+        check_weights(checkpoint, expected, data["weights"], "sampler network")
+        check_finite_weights(checkpoint, data["weights"], "sampler network")
+        net = LearnedSamplerNet(config, robot.dim)
+        net.load_state_dict(data["weights"])
+    low, high = np.asarray(data["low"], np.float64), np.asarray(data["high"], np.float64)
+    return config, net.eval(), low, high, float(data["spacing"])
+
+
+def _check_sampler_fields(data: dict[str, Any], path: str | Path, robot: Robot) -> None:
+    """The fields of a sampler checkpoint that loading it reads, but the network's settings."""
+    from ..models.checkpoint import CheckpointError, finite_number, short_repr
+
+    for key in ("robot", "cvae", "weights", "low", "high", "spacing"):
+        if key not in data:
+            raise CheckpointError(f"{path}: not a learned-sampling network (it has no {key!r})")
+    if not isinstance(data["robot"], str) or data["robot"] != robot.name:
+        raise CheckpointError(f"{path} was trained for robot {short_repr(data['robot'])}, not {robot.name!r}")
+    if not isinstance(data["cvae"], dict):
+        raise CheckpointError(f"{path}: cvae must hold the network's settings, got {type(data['cvae']).__name__}")
+    low, high = data["low"], data["high"]
+    for bound in (low, high):
+        if not isinstance(bound, (list, tuple)) or len(bound) != robot.dim or not all(map(finite_number, bound)):
+            raise CheckpointError(f"{path}: low and high must be {robot.dim} numbers each, got {short_repr(bound)}")
+    if not all(a < b for a, b in zip(low, high)):
+        raise CheckpointError(f"{path}: low must be below high in every coordinate, got {low!r} and {high!r}")
+    spacing = data["spacing"]
+    if not finite_number(spacing) or spacing <= 0:
+        raise CheckpointError(f"{path}: spacing must be a positive number, got {short_repr(spacing)}")
+
+
+def _check_sampler_settings(config: CVAEConfig, path: str | Path) -> None:
+    """A sampler network's settings: its sizes, positive scales and a known frame."""
+    from ..models.checkpoint import CheckpointError, check_sizes, finite_number, short_repr
+
+    check_sizes(path, config, ("latent", "width", "point_width"), ("layers", "point_layers"), "sampler network")
+    for name in ("input_scale", "min_half"):
+        value = getattr(config, name)
+        if not finite_number(value) or value <= 0:
+            raise CheckpointError(
+                f"{path}: the sampler network's {name} must be a positive number, got {short_repr(value)}"
+            )
+    if config.frame not in ("world", "start-goal"):
+        raise CheckpointError(
+            f"{path}: the sampler network's frame must be 'world' or 'start-goal', got {short_repr(config.frame)}"
+        )
+
+
 class LearnedSampler:
     """The CVAE of a checkpoint as a Bi-RRT ``sampler``: ``sampler(problem)`` encodes the
     problem once and returns ``draw(rng, n)``, which draws ``n`` uniform targets and
@@ -62,29 +133,12 @@ class LearnedSampler:
     def __init__(self, checkpoint: str | Path, robot: Robot, lam: float) -> None:
         import torch
 
-        from ..config import from_dict
-        from ..models.checkpoint import CheckpointError, load_checkpoint
-        from ..models.cvae import CVAEConfig, LearnedSamplerNet
-
         if not 0.0 <= lam <= 1.0:
             raise ValueError(f"lam is a probability, got {lam}")
         if robot.config_dim != robot.dim:
             raise ValueError(f"learned sampling samples positions: robot {robot.name} has orientations")
-        data = load_checkpoint(checkpoint)
-        if data.get("kind") != CHECKPOINT_KIND:
-            raise CheckpointError(
-                f"{checkpoint}: not a learned-sampling network (train one with `pointplan lsample-train`)"
-            )
-        if data["robot"] != robot.name:
-            raise CheckpointError(f"{checkpoint} was trained for robot {data['robot']!r}, not {robot.name!r}")
         self.robot, self.lam, self.checkpoint = robot, float(lam), str(checkpoint)
-        self.config = from_dict(CVAEConfig, data["cvae"])
-        self.net = LearnedSamplerNet(self.config, robot.dim)
-        self.net.load_state_dict(data["weights"])
-        self.net.eval()
-        self.low = np.asarray(data["low"], np.float64)
-        self.high = np.asarray(data["high"], np.float64)
-        self.spacing = float(data["spacing"])
+        self.config, self.net, self.low, self.high, self.spacing = load_sampler(checkpoint, robot)
         self.drawn = 0
         self._torch = torch
 
@@ -175,5 +229,6 @@ __all__ = [
     "LearnedSampler",
     "LearnedSamplingPlanner",
     "learned_sampling_factory",
+    "load_sampler",
     "shipped_sampler",
 ]
