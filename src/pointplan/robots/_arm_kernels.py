@@ -50,6 +50,19 @@ def _centers(rot, pos, base_rot, base_pos, s_joint, s_center, c):  # type: ignor
             c[p, i] = pp[i] + rr[i, 0] * s_center[p, 0] + rr[i, 1] * s_center[p, 1] + rr[i, 2] * s_center[p, 2]
 
 
+def _place(q, kin_i, kin_f, s_joint, s_center, rot, pos, c):  # type: ignore[no-untyped-def]
+    """Joint frames (``rot``, ``pos``) and sphere centres ``c`` of configuration ``q`` from
+    the arrays packed by :func:`pack_kinematics`."""
+    n = q.shape[0]
+    rot0 = kin_f[: 9 * n].reshape(n, 3, 3)
+    pos0 = kin_f[9 * n : 12 * n].reshape(n, 3)
+    axis = kin_f[12 * n : 15 * n].reshape(n, 3)
+    base_rot = kin_f[15 * n : 15 * n + 9].reshape(3, 3)
+    base_pos = kin_f[15 * n + 9 : 15 * n + 12]
+    _frames(q, kin_i[0], rot0, pos0, axis, kin_i[1], base_rot, base_pos, rot, pos)
+    _centers(rot, pos, base_rot, base_pos, s_joint, s_center, c)
+
+
 def _sphere_hits(c, p, r, box_c, box_r, box_h, sph_c, sph_r, cyl_c, cyl_r, cyl_rad, cyl_half):  # type: ignore[no-untyped-def]
     """Does sphere ``p`` (centre ``c[p]``, radius ``r``) touch a box, sphere or cylinder?"""
     r2 = r * r
@@ -106,20 +119,13 @@ def _arm_collides(  # type: ignore[no-untyped-def]
     radii then pair distances. ``kin_i``/``kin_f``: the kinematic arrays packed by
     :func:`pack_kinematics`."""
     nb, n = q.shape
-    parent, prismatic = kin_i[0], kin_i[1]
-    rot0 = kin_f[: 9 * n].reshape(n, 3, 3)
-    pos0 = kin_f[9 * n : 12 * n].reshape(n, 3)
-    axis = kin_f[12 * n : 15 * n].reshape(n, 3)
-    base_rot = kin_f[15 * n : 15 * n + 9].reshape(3, 3)
-    base_pos = kin_f[15 * n + 9 : 15 * n + 12]
     p_count = s_joint.shape[0]
     rot = np.empty((n, 3, 3))
     pos = np.empty((n, 3))
     c = np.empty((p_count, 3))
     for b in range(nb):
-        _frames(q[b], parent, rot0, pos0, axis, prismatic, base_rot, base_pos, rot, pos)
+        _place(q[b], kin_i, kin_f, s_joint, s_center, rot, pos, c)
         sz = sizes[0] if sizes.shape[0] == 1 else sizes[b]
-        _centers(rot, pos, base_rot, base_pos, s_joint, s_center, c)
         hit = False
         for p in range(p_count):
             if _sphere_hits(c, p, sz[p], box_c, box_r, box_h, sph_c, sph_r, cyl_c, cyl_r, cyl_rad, cyl_half):
@@ -180,12 +186,6 @@ def _arm_advance(  # type: ignore[no-untyped-def]
     been evaluated (then the segment is certified only as far as it got). ``out_s[e]``: the fraction certified
     free (1: all of it; -1: the start itself is not); ``out_n[e]``: configurations evaluated."""
     ne, n = q0.shape
-    parent, prismatic = kin_i[0], kin_i[1]
-    rot0 = kin_f[: 9 * n].reshape(n, 3, 3)
-    pos0 = kin_f[9 * n : 12 * n].reshape(n, 3)
-    axis = kin_f[12 * n : 15 * n].reshape(n, 3)
-    base_rot = kin_f[15 * n : 15 * n + 9].reshape(3, 3)
-    base_pos = kin_f[15 * n + 9 : 15 * n + 12]
     p_count = s_joint.shape[0]
     rot = np.empty((n, 3, 3))
     pos = np.empty((n, 3))
@@ -210,8 +210,7 @@ def _arm_advance(  # type: ignore[no-untyped-def]
             it += 1
             for j in range(n):
                 q[j] = q0[e, j] + s * twist[e, j]
-            _frames(q, parent, rot0, pos0, axis, prismatic, base_rot, base_pos, rot, pos)
-            _centers(rot, pos, base_rot, base_pos, s_joint, s_center, c)
+            _place(q, kin_i, kin_f, s_joint, s_center, rot, pos, c)
             _sphere_clearances(c, radii, box_c, box_r, box_h, sph_c, sph_r, cyl_c, cyl_r, cyl_rad, cyl_half, clear)
             step = np.inf
             blocked = False
@@ -248,6 +247,7 @@ def _arm_advance(  # type: ignore[no-untyped-def]
 
 _frames = numba.njit(cache=True, nogil=True)(_frames)
 _centers = numba.njit(cache=True, nogil=True)(_centers)
+_place = numba.njit(cache=True, nogil=True)(_place)
 _sphere_hits = numba.njit(cache=True, nogil=True)(_sphere_hits)
 _sphere_clearances = numba.njit(cache=True, nogil=True)(_sphere_clearances)
 _arm_advance = numba.njit(cache=True, nogil=True)(_arm_advance)
