@@ -9,61 +9,81 @@ import numba
 import numpy as np
 
 
+def _obb_row(ca, ra, ha, i, cb, rb, hb, out, first, rel, absr, t):  # type: ignore[no-untyped-def]
+    """Separating-axis test of box ``i`` of A (centres ``ca (M, 3)``, rotations ``ra (M, 3,
+    3)`` whose columns are the box axes, half sides ``ha (M, 3)``) against every box of B
+    (``(K, ...)``): writes ``out (K,)`` (True where the closed boxes overlap) and returns
+    whether any does; with ``first`` it stops at the first overlap (the rest of ``out`` is
+    then not written). ``rel``, ``absr`` ``(3, 3)`` and ``t (3,)``: scratch."""
+    anyhit = False
+    for j in range(cb.shape[0]):
+        # bounding-sphere prefilter
+        d0 = cb[j, 0] - ca[i, 0]
+        d1 = cb[j, 1] - ca[i, 1]
+        d2 = cb[j, 2] - ca[i, 2]
+        reach = np.sqrt(ha[i, 0] ** 2 + ha[i, 1] ** 2 + ha[i, 2] ** 2) + np.sqrt(
+            hb[j, 0] ** 2 + hb[j, 1] ** 2 + hb[j, 2] ** 2
+        )
+        if d0 * d0 + d1 * d1 + d2 * d2 > reach * reach:
+            out[j] = False
+            continue
+        for p in range(3):
+            t[p] = ra[i, 0, p] * d0 + ra[i, 1, p] * d1 + ra[i, 2, p] * d2
+            for q in range(3):
+                s = 0.0
+                for r in range(3):
+                    s += ra[i, r, p] * rb[j, r, q]
+                rel[p, q] = s
+                absr[p, q] = abs(s) + 1e-9
+        sep = False
+        for p in range(3):  # A's face axes
+            rb_ = hb[j, 0] * absr[p, 0] + hb[j, 1] * absr[p, 1] + hb[j, 2] * absr[p, 2]
+            if abs(t[p]) > ha[i, p] + rb_:
+                sep = True
+                break
+        if not sep:
+            for q in range(3):  # B's face axes
+                tb = t[0] * rel[0, q] + t[1] * rel[1, q] + t[2] * rel[2, q]
+                ra_ = ha[i, 0] * absr[0, q] + ha[i, 1] * absr[1, q] + ha[i, 2] * absr[2, q]
+                if abs(tb) > ra_ + hb[j, q]:
+                    sep = True
+                    break
+        if not sep:
+            for p in range(3):  # cross products of edges
+                p1, p2 = (p + 1) % 3, (p + 2) % 3
+                for q in range(3):
+                    q1, q2 = (q + 1) % 3, (q + 2) % 3
+                    lhs = abs(t[p2] * rel[p1, q] - t[p1] * rel[p2, q])
+                    ra_ = ha[i, p1] * absr[p2, q] + ha[i, p2] * absr[p1, q]
+                    rb_ = hb[j, q1] * absr[p, q2] + hb[j, q2] * absr[p, q1]
+                    if lhs > ra_ + rb_:
+                        sep = True
+                        break
+                if sep:
+                    break
+        out[j] = not sep
+        if not sep:
+            anyhit = True
+            if first:
+                return True
+    return anyhit
+
+
+_obb_row = numba.njit(cache=True, nogil=True, inline="always")(_obb_row)
+
+
 def _obb_overlap_flat(ca, ra, ha, cb, rb, hb, out):  # type: ignore[no-untyped-def]
-    """Separating-axis test of boxes A ``(B, M, ...)`` against boxes B ``(B, K, ...)``
-    (rotation columns are the box axes, ``h`` half sides); writes ``out (B, M, K)``."""
+    """Separating-axis test (:func:`_obb_row`) of boxes A ``(B, M, ...)`` against boxes B
+    ``(B, K, ...)`` (rotation columns are the box axes, ``h`` half sides); writes ``out
+    (B, M, K)``."""
     nb, m, k = out.shape
     rel = np.empty((3, 3))
     absr = np.empty((3, 3))
     t = np.empty(3)
     for b in range(nb):
+        cab, rab, hab, cbb, rbb, hbb, outb = ca[b], ra[b], ha[b], cb[b], rb[b], hb[b], out[b]
         for i in range(m):
-            for j in range(k):
-                # bounding-sphere prefilter
-                d0 = cb[b, j, 0] - ca[b, i, 0]
-                d1 = cb[b, j, 1] - ca[b, i, 1]
-                d2 = cb[b, j, 2] - ca[b, i, 2]
-                reach = np.sqrt(ha[b, i, 0] ** 2 + ha[b, i, 1] ** 2 + ha[b, i, 2] ** 2) + np.sqrt(
-                    hb[b, j, 0] ** 2 + hb[b, j, 1] ** 2 + hb[b, j, 2] ** 2
-                )
-                if d0 * d0 + d1 * d1 + d2 * d2 > reach * reach:
-                    out[b, i, j] = False
-                    continue
-                for p in range(3):
-                    t[p] = ra[b, i, 0, p] * d0 + ra[b, i, 1, p] * d1 + ra[b, i, 2, p] * d2
-                    for q in range(3):
-                        s = 0.0
-                        for r in range(3):
-                            s += ra[b, i, r, p] * rb[b, j, r, q]
-                        rel[p, q] = s
-                        absr[p, q] = abs(s) + 1e-9
-                sep = False
-                for p in range(3):  # A's face axes
-                    rb_ = hb[b, j, 0] * absr[p, 0] + hb[b, j, 1] * absr[p, 1] + hb[b, j, 2] * absr[p, 2]
-                    if abs(t[p]) > ha[b, i, p] + rb_:
-                        sep = True
-                        break
-                if not sep:
-                    for q in range(3):  # B's face axes
-                        tb = t[0] * rel[0, q] + t[1] * rel[1, q] + t[2] * rel[2, q]
-                        ra_ = ha[b, i, 0] * absr[0, q] + ha[b, i, 1] * absr[1, q] + ha[b, i, 2] * absr[2, q]
-                        if abs(tb) > ra_ + hb[b, j, q]:
-                            sep = True
-                            break
-                if not sep:
-                    for p in range(3):  # cross products of edges
-                        p1, p2 = (p + 1) % 3, (p + 2) % 3
-                        for q in range(3):
-                            q1, q2 = (q + 1) % 3, (q + 2) % 3
-                            lhs = abs(t[p2] * rel[p1, q] - t[p1] * rel[p2, q])
-                            ra_ = ha[b, i, p1] * absr[p2, q] + ha[b, i, p2] * absr[p1, q]
-                            rb_ = hb[b, j, q1] * absr[p, q2] + hb[b, j, q2] * absr[p, q1]
-                            if lhs > ra_ + rb_:
-                                sep = True
-                                break
-                        if sep:
-                            break
-                out[b, i, j] = not sep
+            _obb_row(cab, rab, hab, i, cbb, rbb, hbb, outb[i], False, rel, absr, t)
 
 
 _obb_overlap_flat = numba.njit(cache=True, nogil=True)(_obb_overlap_flat)
@@ -88,50 +108,59 @@ def obb_overlap_compiled(ca, ra, ha, cb, rb, hb):  # type: ignore[no-untyped-def
     return out.reshape(batch + (m, k))
 
 
-def _ray_box_flat(o, d, c, rot, h, t0, t1, axis):  # type: ignore[no-untyped-def]
-    """Slab test of rays ``o, d: (B, R, 3)`` against boxes ``c (B, K, 3)``, ``rot (B, K, 3,
-    3)`` (columns = box axes), half sides ``h (B, K, 3)``. Writes the entry and exit
-    parameters ``t0, t1 (B, R, K)`` (``inf, -inf`` for a miss) and the entry axis (the
-    first of the axes whose slab is entered last). A ray parallel to a slab is inside it
-    when its origin is in the closed slab."""
+def _ray_box_row(o, d, r, c, rot, h, t0, t1, axis):  # type: ignore[no-untyped-def]
+    """Slab test of ray ``r`` of ``o, d: (R, 3)`` against every box ``c (K, 3)``, ``rot (K,
+    3, 3)`` (columns = box axes), half sides ``h (K, 3)``. Writes the entry and exit
+    parameters ``t0, t1 (K,)`` (``inf, -inf`` for a miss) and the entry axis (the first of
+    the axes whose slab is entered last). A ray parallel to a slab is inside it when its
+    origin is in the closed slab."""
     inf = np.inf
+    for k in range(c.shape[0]):
+        lo_max = -inf
+        hi_min = inf
+        ax = 0
+        for i in range(3):
+            # local coordinates: column i of the rotation
+            ol = (
+                (o[r, 0] - c[k, 0]) * rot[k, 0, i]
+                + (o[r, 1] - c[k, 1]) * rot[k, 1, i]
+                + (o[r, 2] - c[k, 2]) * rot[k, 2, i]
+            )
+            dl = d[r, 0] * rot[k, 0, i] + d[r, 1] * rot[k, 1, i] + d[r, 2] * rot[k, 2, i]
+            hh = h[k, i]
+            if dl == 0.0:
+                if -hh <= ol <= hh:
+                    lo, hi = -inf, inf
+                else:
+                    lo, hi = inf, -inf
+            else:
+                ta = (-hh - ol) / dl
+                tb = (hh - ol) / dl
+                lo, hi = (ta, tb) if ta <= tb else (tb, ta)
+            if i == 0 or lo > lo_max:
+                ax = i
+                lo_max = lo
+            hi_min = min(hi_min, hi)
+        if lo_max > hi_min:
+            t0[k] = inf
+            t1[k] = -inf
+        else:
+            t0[k] = lo_max
+            t1[k] = hi_min
+        axis[k] = ax
+
+
+_ray_box_row = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(_ray_box_row)
+
+
+def _ray_box_flat(o, d, c, rot, h, t0, t1, axis):  # type: ignore[no-untyped-def]
+    """:func:`_ray_box_row` for rays ``o, d: (B, R, 3)`` against boxes ``c (B, K, 3)``,
+    ``rot (B, K, 3, 3)``, ``h (B, K, 3)``: writes ``t0, t1, axis (B, R, K)``."""
     nb, nr, nk = t0.shape
     for b in range(nb):
-        for k in range(nk):
-            for r in range(nr):
-                lo_max = -inf
-                hi_min = inf
-                ax = 0
-                for i in range(3):
-                    # local coordinates: column i of the rotation
-                    ol = (
-                        (o[b, r, 0] - c[b, k, 0]) * rot[b, k, 0, i]
-                        + (o[b, r, 1] - c[b, k, 1]) * rot[b, k, 1, i]
-                        + (o[b, r, 2] - c[b, k, 2]) * rot[b, k, 2, i]
-                    )
-                    dl = d[b, r, 0] * rot[b, k, 0, i] + d[b, r, 1] * rot[b, k, 1, i] + d[b, r, 2] * rot[b, k, 2, i]
-                    hh = h[b, k, i]
-                    if dl == 0.0:
-                        if -hh <= ol <= hh:
-                            lo, hi = -inf, inf
-                        else:
-                            lo, hi = inf, -inf
-                    else:
-                        ta = (-hh - ol) / dl
-                        tb = (hh - ol) / dl
-                        lo, hi = (ta, tb) if ta <= tb else (tb, ta)
-                    if i == 0 or lo > lo_max:
-                        if i == 0 or lo > lo_max:
-                            ax = i if (i == 0 or lo > lo_max) else ax
-                        lo_max = lo
-                    hi_min = min(hi_min, hi)
-                if lo_max > hi_min:
-                    t0[b, r, k] = inf
-                    t1[b, r, k] = -inf
-                else:
-                    t0[b, r, k] = lo_max
-                    t1[b, r, k] = hi_min
-                axis[b, r, k] = ax
+        ob, db, cb, rotb, hb, t0b, t1b, axb = o[b], d[b], c[b], rot[b], h[b], t0[b], t1[b], axis[b]
+        for r in range(nr):
+            _ray_box_row(ob, db, r, cb, rotb, hb, t0b[r], t1b[r], axb[r])
 
 
 _ray_box_flat = numba.njit(cache=True, nogil=True, error_model="numpy")(_ray_box_flat)

@@ -181,6 +181,18 @@ class CollisionWorld:
     def batch_shape(self) -> tuple[int, ...]:
         return self.box_c.shape[:-2]
 
+    @property
+    def boxes_only(self) -> bool:
+        """Are all the obstacles boxes (no spheres, capsules, cylinders, cones, meshes or
+        point clouds, in any scene)?"""
+        others = (self.sph_c, self.cap_a, self.cyl_c, self.con_c)
+        return (
+            all(a.shape[-2] == 0 for a in others)
+            and not self._has_clouds
+            and not any(self.coal_items)
+            and not any(self.meshes)
+        )
+
     # ------------------------------------------------------------------ build
     @classmethod
     def from_shapes(cls, shapes: Sequence[Shape], dim: int) -> CollisionWorld:

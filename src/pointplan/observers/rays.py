@@ -42,13 +42,26 @@ def ray_origins(robot: Robot) -> Array:
     return np.zeros((1, robot.dim))
 
 
+def _rotate(rot: Array, v: Array) -> Array:
+    """``rot (E, 3, 3)`` applied to ``v (R, 3)``: ``(E, R, 3)``, summed in a fixed order
+    (``einsum`` sums in an order of its own), the order of the compiled rollout's ray
+    casting (``planners/_rigid_kernels.py``): the same rays to the last bit, so both thin
+    the same hits (a wall lies on a cell boundary of the thinning grid, where the last bit
+    of a hit decides its cell)."""
+    r = rot[:, None, :, :]
+    return r[..., 0] * v[None, :, 0, None] + r[..., 1] * v[None, :, 1, None] + r[..., 2] * v[None, :, 2, None]
+
+
 def thin_grid(points: Array, normals: Array, valid: NDArray[np.bool_], spacing: float) -> NDArray[np.bool_]:
-    """Keep one point per cell of a grid of ``spacing`` over (point, normal) space, per
-    environment: ``points, normals (E, R, 3)``, ``valid (E, R)`` -> kept ``(E, R)``."""
+    """Keep one point per cell of a grid of ``spacing`` over (point, normal) space (cells
+    centred on multiples of ``spacing``), per environment: ``points, normals (E, R, 3)``, ``valid (E, R)`` -> kept ``(E, R)``."""
     if spacing < 0.01:
         raise ValueError("thinning spacing below 0.01 is not supported (cell keys are 8-bit)")
     e, r, _ = points.shape
-    cells = np.floor(np.concatenate([points, normals], -1) / spacing).astype(np.int64)
+    # cells centred on multiples of the spacing: the walls (at multiples of it in the
+    # project's scenes) and the zero components of axis-aligned normals then lie at a
+    # cell's centre, not on a boundary where the last bit of a hit decides its cell
+    cells = np.floor(np.concatenate([points, normals], -1) / spacing + 0.5).astype(np.int64)
     # one int64 key per (environment, cell): 6 cell coordinates of 8 bits each, env above
     cells = np.clip(cells + 128, 0, 255)
     key = np.repeat(np.arange(e, dtype=np.int64)[:, None], r, 1) << np.int64(48)
@@ -128,8 +141,8 @@ class LocalRays(Observer):
 
         rot = self.robot.rotations(q)
         pos = self.robot.positions(q)
-        origins = np.einsum("eij,rj->eri", rot, self.body_origins) + pos[:, None, :]
-        dirs = np.einsum("eij,rj->eri", rot, self.body_dirs)
+        origins = _rotate(rot, self.body_origins) + pos[:, None, :]
+        dirs = _rotate(rot, self.body_dirs)
         self._origins_world = origins
         hits = cast_rays(self.stacked_world(t), origins, dirs, self.max_range)
         ok = hits.hit & (hits.distance <= self.max_range)

@@ -28,6 +28,8 @@ import numpy as np
 
 #: as in pointplan.robots.motion (imported there; repeated as literals for the compiler)
 _CONTACT_MARGIN = 1e-5
+#: as in pointplan.models.actor_critic
+_LOG_STD_MIN, _LOG_STD_MAX = -20.0, 2.0
 _BOUNDS_EPS = 1e-12
 _GRID_SLACK = 1e-9
 
@@ -395,23 +397,23 @@ def _dense_row(z, w, b, out):  # type: ignore[no-untyped-def]
 
 
 @_jit_fast
-def _action(q, goal, idx, pts, nrm, s32, wflat, layout, scale, action_dim, ws):  # type: ignore[no-untyped-def]
-    """The actor's action (float32, a view into ``ws``) for the drawn points ``idx``: the
-    folded first layer (:func:`_first_layer`), ELU, the hidden layers (residual, the last
-    max-pooled), the head on ``[pooled, (goal - q) / scale]``, ``tanh`` of the first
-    ``action_dim`` outputs. ``ws``: :func:`_workspace` (nothing is allocated here)."""
+def _network(ws, wflat, layout, gdim, action_dim, noise, sampled):  # type: ignore[no-untyped-def]
+    """The actor's action (float32, a view into ``ws``) from the input layer's
+    pre-activations in ``h`` (the first array of ``ws``, bias included; overwritten) and
+    the goal input in the head's input row (``vec[2 width + features:][: gdim]``, written
+    by the caller): ELU, the hidden layers (residual, the last max-pooled), the head on
+    ``[pooled, goal input]``, then ``tanh(mean)``, or with ``sampled`` ``tanh(mean +
+    exp(clip(log_std)) * noise)`` (``noise``: float32, one per action component).
+    ``ws``: :func:`_workspace` (nothing is allocated here)."""
     h, y, tmp, ki, vec = ws
-    d = q.shape[0]
     n = h.shape[0]
     width, features, n_hidden, n_head = layout[0], layout[1], layout[2], layout[3]
-    _first_layer(q, idx, pts, nrm, s32, wflat, layout, h, vec)
     _elu(h.reshape(-1), tmp, ki)  # (the first layer's bias is in h already)
     off_w = features * width + width
     off_b = off_w + n_hidden * width * width
     rows = vec[width + features :]  # the head's input and output rows
     head = rows.shape[0] // 3
-    z = rows[: width + d]
-    pooled = z[:width]
+    pooled = rows[:width]
     if n_hidden == 0:
         for o in range(width):
             pooled[o] = h[0, o]
@@ -433,8 +435,6 @@ def _action(q, goal, idx, pts, nrm, s32, wflat, layout, scale, action_dim, ws): 
                     pooled[o] = max(pooled[o], y[p, o])
             for o in range(width):
                 pooled[o] += b[o]
-    for i in range(d):
-        z[width + i] = np.float32((goal[i] - q[i]) / scale[i])
     off = off_b + n_hidden * width
     src, dst = 0, head
     for li in range(n_head):
@@ -449,9 +449,29 @@ def _action(q, goal, idx, pts, nrm, s32, wflat, layout, scale, action_dim, ws): 
             _elu(out, tmp, ki)
         src, dst = dst, (head if dst != head else 2 * head)
     a = rows[src : src + action_dim]
-    for i in range(action_dim):
-        a[i] = np.tanh(a[i])
+    if sampled:
+        for i in range(action_dim):
+            log_std = min(max(rows[src + action_dim + i], np.float32(_LOG_STD_MIN)), np.float32(_LOG_STD_MAX))
+            a[i] = np.tanh(a[i] + np.exp(log_std) * noise[i])
+    else:
+        for i in range(action_dim):
+            a[i] = np.tanh(a[i])
     return a
+
+
+@_jit_fast
+def _action(q, goal, idx, pts, nrm, s32, wflat, layout, scale, action_dim, ws):  # type: ignore[no-untyped-def]
+    """The actor's mean action (float32, a view into ``ws``) for the drawn points ``idx``
+    of a translating ball: the folded first layer (:func:`_first_layer`), the goal input
+    ``(goal - q) / scale``, then :func:`_network`."""
+    h, y, tmp, ki, vec = ws
+    d = q.shape[0]
+    width, features = layout[0], layout[1]
+    _first_layer(q, idx, pts, nrm, s32, wflat, layout, h, vec)
+    z = vec[width + features + width :]
+    for i in range(d):
+        z[i] = np.float32((goal[i] - q[i]) / scale[i])
+    return _network(ws, wflat, layout, d, action_dim, vec[:0], False)
 
 
 def pointnet_action(

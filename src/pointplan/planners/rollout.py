@@ -603,6 +603,7 @@ class RolloutEngine:
         self.fast = self.policy.fast_actor() if self.policy is not None else None
         self._observer: Any = None
         self._compiled: Any = None
+        self._compiled_rays: Any = None
         self._stream_rng: np.random.Generator | None = None
         self._stream = np.empty(0)
 
@@ -699,6 +700,11 @@ class RolloutEngine:
         """One rollout of ``problem``: the mean action (``sampled=False``: ``nrng`` draws
         the escapes) or sampled actions (``nrng`` draws them all)."""
         opts = self.options
+        rays = self.compiled_rays() if not problem.scene.dynamic else None
+        if rays is not None:
+            res = rays.rollout(problem, nrng, sampled, time.perf_counter())
+            if res is not None:
+                return res
         if problem.scene.dynamic or not self.one_robot():
             lock = replace(opts, noise=opts.action_noise if sampled else 0.0)
             with torch_threads(1):
@@ -745,6 +751,17 @@ class RolloutEngine:
             ok = ok and self.one_robot() and bool(getattr(self.observer, "compiled_points", False))
             self._compiled = (ok and CompiledBall.build(self)) or False
         return self._compiled or None
+
+    def compiled_rays(self) -> Any:
+        """The compiled ray-casting rollout
+        (:class:`~pointplan.planners.rollout_compiled.CompiledRays`) when it applies to
+        this policy, robot and observer; else ``None``."""
+        if self._compiled_rays is None:
+            from .rollout_compiled import CompiledRays
+
+            ok = self.options.compiled and self.options.draws == 1 and self.observer_wrapper is None
+            self._compiled_rays = (ok and self.policy is not None and CompiledRays.build(self)) or False
+        return self._compiled_rays or None
 
     def _act(self, obs: np.ndarray, q: np.ndarray, goal: np.ndarray, noise: np.ndarray | None) -> np.ndarray:
         from ..models.inputs import goal_input, obs_input

@@ -1,8 +1,12 @@
-"""The compiled form of the rollout engine's one-robot rollout: a translating ball (the
-disc, the sphere) among boxes, seeing a uniform subset of the scene's points, with a
-PointNet in numpy, stepped in one numba call (:func:`._policy_kernels._rollout`: the same
-greedy goal test, action, move and end tests as the step loop of
-:mod:`pointplan.planners.rollout`, in the same arithmetic).
+"""The compiled forms of the rollout engine's one-robot rollout, each a whole rollout in
+one numba call with the same greedy goal test, action, move and end tests as the step loop
+of :mod:`pointplan.planners.rollout`, in the same arithmetic:
+
+- :class:`CompiledBall`: a translating ball (the disc, the sphere) among boxes, seeing a
+  uniform subset of the scene's points (:func:`._policy_kernels._rollout`);
+- :class:`CompiledRays`: a free-flying body of boxes (the S-shape) among boxes, seeing by
+  ray casting (``local``), escapes and sampled attempts included
+  (:func:`._rigid_kernels.rollout_rigid`).
 
 Most of a call's time beyond the network is not arithmetic but memory: a caller does
 other work between plans, and every Python and numpy operation here then waits for code
@@ -22,9 +26,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from ..geometry.shapes import Box
+from ..observers.rays import LocalRays, WideRays
 from ..robots.point import Disc2D, Sphere3D
 from ..scenes.scene import Problem, Scene
 from . import _policy_kernels as K
+from . import _rigid_kernels as RK
 from .base import PlanResult
 
 if TYPE_CHECKING:
@@ -49,8 +55,9 @@ class EngineView(Protocol):
 
 
 _F64 = np.dtype(np.float64)
-#: ``info["end"]`` of the compiled rollout's end codes (``_policy_kernels.END_*``)
-END_NAMES = ("horizon", "stalled", "goal", "goal", "near-goal", "near-goal", "escape")
+#: ``info["end"]`` of the compiled rollouts' end codes (``_policy_kernels.END_*``, then
+#: ``_rigid_kernels.END_AT_GOAL``)
+END_NAMES = ("horizon", "stalled", "goal", "goal", "near-goal", "near-goal", "escape", "goal")
 
 
 class CompiledBall:
@@ -202,4 +209,161 @@ class CompiledBall:
         return tuple(rows)
 
 
-__all__ = ["END_NAMES", "CompiledBall"]
+def _boxes_only(scene: Scene) -> bool:
+    """Is every obstacle of the static scene a box (what the compiled rollouts check)?"""
+    world = scene.world
+    return (
+        not scene.dynamic
+        and world.batch_shape == ()
+        and world.box_c.shape[0] == len(scene.obstacles)
+        and all(type(o) is Box for o in scene.obstacles)
+    )
+
+
+class CompiledRays:
+    """The compiled rollout of an engine whose robot is a free-flying body of boxes and
+    whose observer casts rays (:class:`~pointplan.observers.rays.LocalRays`): one call per
+    attempt, the mean action with its escape or a sampled attempt, in scenes of boxes.
+    Made by :meth:`build`."""
+
+    def __init__(self, engine: EngineView, body: tuple[np.ndarray, ...], rays: tuple[np.ndarray, ...]) -> None:
+        self.engine = engine
+        fast, robot, observer = engine.fast, engine.robot, engine.observer
+        self.body, self.rays = body, rays
+        self.weights = K.pack_weights(fast.inp, fast.hidden, fast.head)
+        self.scale = np.ascontiguousarray(robot.action_scale, np.float64)
+        self.blk = len(rays[0]) + int(observer.n_points)
+        self._scene: Scene | None = None
+        self._scene_args: tuple[Any, ...] | None = None
+
+    @classmethod
+    def build(cls, engine: EngineView) -> CompiledRays | None:
+        """The compiled rollout of ``engine``, or ``None`` where it does not apply (another
+        robot or observer, a network of another shape, an escape toward a subgoal)."""
+        fast, robot, observer, esc = engine.fast, engine.robot, engine.observer, engine.escape
+        if fast is None or type(observer) not in (LocalRays, WideRays) or esc.subgoal:
+            return None
+        parts = robot.parts
+        if (
+            robot.dim != 3
+            or robot.twist_dim != 6
+            or robot.config_dim != 7
+            or len(parts.sphere_radii)
+            or not len(parts.box_halfs)
+            or not np.array_equal(parts.box_rotations, np.broadcast_to(np.eye(3), parts.box_rotations.shape))
+        ):
+            return None
+        width = fast.inp[0].shape[1]
+        if (
+            fast.inp[0].shape[0] != 6
+            or any(w.shape != (width, width) for w, _ in fast.hidden)
+            or fast.head[0][0].shape[0] != width + 6
+            or fast.action_dim != 6
+        ):
+            return None
+        f = np.ascontiguousarray
+        body = (f(parts.box_centers, np.float64), f(parts.box_halfs, np.float64), f(robot._corner_velocity))
+        return cls(engine, body, (f(observer.body_origins, np.float64), f(observer.body_dirs, np.float64)))
+
+    @staticmethod
+    def applies(scene: Scene) -> bool:
+        """Does the compiled rollout plan in ``scene`` (static, boxes only)?"""
+        return _boxes_only(scene)
+
+    def _scene_inputs(self, scene: Scene) -> tuple[Any, ...] | None:
+        """The obstacle boxes and the boxes rays hit (with the wall slabs) of ``scene``, or
+        ``None`` where it has obstacles other than boxes."""
+        if not _boxes_only(scene):
+            return None
+        f = np.ascontiguousarray
+        world = scene.world
+        rw = self.engine.observer.ray_world(scene)
+        boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        rboxes = (f(rw.box_c, np.float64), f(rw.box_r, np.float64), f(rw.box_h, np.float64), np.any(rw.box_h > 0, -1))
+        return boxes, rboxes, f(scene.low, np.float64), f(scene.high, np.float64)
+
+    def rollout(self, problem: Problem, nrng: np.random.Generator, sampled: bool, t0: float) -> PlanResult | None:
+        """One attempt of ``RolloutEngine.plan`` (the mean action with the escape drawn
+        from ``nrng``, or with ``sampled`` every action drawn from it), or ``None`` where
+        the scene is not boxes only."""
+        scene = problem.scene
+        if scene is not self._scene:
+            self._scene_args = self._scene_inputs(scene)
+            self._scene = scene
+        if self._scene_args is None:
+            return None
+        boxes, rboxes, low, high = self._scene_args
+        eng = self.engine
+        opts, esc, env, observer = eng.options, eng.escape, eng.env, eng.observer
+        horizon = eng.horizon
+        noisy = esc.on or sampled  # the step loop then draws normals at every step
+        normals = nrng.standard_normal((horizon, 6)) if noisy else np.zeros((0, 6))
+        fparams = np.array(
+            [
+                env.substep,
+                env.goal_tolerance,
+                opts.stall_distance,
+                0.01,  # the goal edge: as GoalTester and connect_to_goal check it
+                float(eng.robot.action_scale[0]),
+                esc.still,
+                esc.noise,
+                opts.action_noise if sampled else 0.0,
+                observer.max_range,
+                observer.spacing,
+            ]
+        )
+        iparams = np.array(
+            [
+                horizon,
+                int(opts.stall_steps or 0),
+                int(opts.greedy_goal),
+                int(opts.connect_goal),
+                int(env.bounds == "clip"),
+                int(observer.n_points),
+                6,
+                esc.window,
+                esc.steps if esc.on else 0,
+                int(noisy),
+            ],
+            np.int64,
+        )
+        start, goal = (np.ascontiguousarray(x, np.float64) for x in (problem.start, problem.goal))
+        path = np.empty((horizon + 2, 7))
+        stream = eng._uniforms(horizon * self.blk)
+        t1 = time.perf_counter()
+        end, rows, checks, escapes = RK.rollout_rigid(
+            start, goal, low, high, boxes, rboxes, self.body, self.rays, *self.weights, self.scale, fparams, iparams,
+            stream, normals, path,
+        )  # fmt: skip
+        t2 = time.perf_counter()
+        return self._result(end, path[:rows], checks, escapes, t2 - t1, time.perf_counter() - t0)
+
+    def _result(self, end: int, path: np.ndarray, checks: int, escapes: int, dt: float, total: float) -> PlanResult:
+        """The :class:`PlanResult` the step loop gives for a rollout that ended so."""
+        opts = self.engine.options
+        to_goal = end in (K.END_GREEDY, K.END_TOL_GOAL)
+        success = to_goal or end in (K.END_TOL_BLOCKED, K.END_TOL, RK.END_AT_GOAL)
+        info: dict[str, Any] = {"end": END_NAMES[end]}
+        if end == K.END_GREEDY:
+            info.update(goal_connection="free", greedy_goal=True)
+        elif end in (K.END_TOL_GOAL, K.END_TOL_BLOCKED, RK.END_AT_GOAL):
+            info["goal_connection"] = "blocked" if end == K.END_TOL_BLOCKED else "free"
+        elif opts.connect_goal and not success:
+            info["goal_connection"] = None
+        if self.engine.escape.on:
+            info["escapes"] = int(escapes)
+        if not opts.crush_ends:
+            info["crushed"] = 0
+        steps = len(path) - 1 - int(to_goal)
+        info["time_split"] = {
+            "observe": 0.0,
+            "network": 0.0,
+            "motion": 0.0,
+            "goal": 0.0,
+            "compiled": dt,
+            "steps": steps,
+        }
+        return PlanResult(path, success, steps, int(checks), total, info=info)
+
+
+__all__ = ["END_NAMES", "CompiledBall", "CompiledRays"]

@@ -242,9 +242,10 @@ class Robot(ABC):
     @property
     def _corner_velocity(self) -> Array:
         """``(twist_dim, Pb * 2^d * d)``: the twist's linear map to the velocities ``v + w x
-        p`` of the box parts' corners ``p``, in each part's own axes (computed once)."""
+        p`` of the box parts' corners ``p``, in each part's own axes (computed once per
+        body: a ``padded`` copy, which has other corners, computes its own)."""
         cached = self.__dict__.get("_corner_velocity_cache")
-        if cached is None:
+        if cached is None or cached[0] is not self.parts:
             p = self.parts
             signs = np.array(np.meshgrid(*[[-1.0, 1.0]] * self.dim, indexing="ij")).reshape(self.dim, -1).T
             corners = p.box_centers[:, None, :] + np.einsum(
@@ -258,8 +259,8 @@ class Robot(ABC):
                 else:
                     u = e[:3] + np.cross(e[3:], corners)
                 rows.append(np.einsum("pij,pki->pkj", p.box_rotations, u).reshape(-1))
-            cached = self.__dict__["_corner_velocity_cache"] = np.array(rows)
-        return cached
+            cached = self.__dict__["_corner_velocity_cache"] = (p, np.array(rows))
+        return cached[1]
 
     def check_motions(
         self,

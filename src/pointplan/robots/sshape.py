@@ -5,10 +5,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..geometry import lie
 from ..geometry._se3_kernels import pose_integrate_compiled, pose_log_compiled
-from .base import Array, BodyParts, Robot
+from ..geometry.collision import CollisionWorld
+from . import _body_kernels
+from .base import Array, Bool, BodyParts, Robot
+from .motion import MotionCheck
 
 #: centreline corners of the S-shape, body frame (from the paper's release)
 S_CORNERS = np.array(
@@ -111,13 +115,82 @@ class SShape(Robot):
     def rotations(self, q: Array) -> Array:
         return lie.quat_to_matrix(np.asarray(q, np.float64)[..., 3:])
 
+    def check_motions(
+        self,
+        world: CollisionWorld,
+        q0: Array,
+        twist: Array,
+        n: NDArray[np.int64],
+        low: Array | None = None,
+        high: Array | None = None,
+        fallback: Bool | None = None,
+    ) -> MotionCheck:
+        """:meth:`Robot.check_motions`, compiled where every obstacle is a box
+        (:func:`pointplan.robots._body_kernels.check_motions_boxes`: the same answers,
+        counts and samples); otherwise the numpy check."""
+        if not world.boxes_only:
+            return super().check_motions(world, q0, twist, n, low, high, fallback)
+        q0 = np.asarray(q0, np.float64)
+        lead = q0.shape[:-1]
+        stacked = world.batch_shape != ()
+        if stacked and lead != world.batch_shape:
+            return super().check_motions(world, q0, twist, n, low, high, fallback)
+        f = np.ascontiguousarray
+        m = math.prod(lead)
+        qf = f(np.broadcast_to(q0, lead + (7,)).reshape(m, 7))
+        tf = f(np.broadcast_to(np.asarray(twist, np.float64), lead + (6,)).reshape(m, 6))
+        nf = f(np.maximum(np.broadcast_to(np.asarray(n, np.int64), lead), 1).reshape(m))
+        fb = np.ones(m, bool) if fallback is None else f(np.broadcast_to(fallback, lead).reshape(m))
+        if low is None or high is None:  # bounds that stop nothing
+            low, high = np.full(3, -1e300), np.full(3, 1e300)
+        lo = f(np.broadcast_to(np.asarray(low, np.float64), lead + (3,)).reshape(m, 3))
+        hi = f(np.broadcast_to(np.asarray(high, np.float64), lead + (3,)).reshape(m, 3))
+        boxes = [f(a, np.float64) for a in (world.box_c, world.box_r, world.box_h)]
+        if not stacked:
+            boxes = [b[None] for b in boxes]
+        configs = np.empty((m, int(nf.max()) + 1 if m else 2, 7))
+        out = np.empty((m, 3), np.int64)
+        _body_kernels.check_motions_boxes(qf, tf, nf, fb, lo, hi, self._body_arrays(), *boxes, stacked, configs, out)
+        return MotionCheck(
+            free=out[:, 0].reshape(lead),
+            collided=out[:, 1].astype(bool).reshape(lead),
+            checks=out[:, 2].reshape(lead),
+            configs=configs.reshape(lead + configs.shape[1:]),
+        )
+
+    def _body_arrays(self) -> tuple[Array, Array, Array]:
+        """The body's box centres, half sides and corner map as the compiled kernels take
+        them (built once per body: ``padded`` copies get their own)."""
+        cached = self.__dict__.get("_body_cache")
+        if cached is None or cached[0] is not self.parts:
+            f = np.ascontiguousarray
+            p = self.parts
+            if not np.array_equal(p.box_rotations, np.broadcast_to(np.eye(3), p.box_rotations.shape)):
+                raise ValueError("the compiled checks take body boxes aligned with the body frame")
+            arrays = (f(p.box_centers, np.float64), f(p.box_halfs, np.float64), f(self._corner_velocity))
+            cached = self.__dict__["_body_cache"] = (p, arrays)
+        return cached[1]
+
     def sample_orientation(self, rng: np.random.Generator, n: int) -> Array:
         return lie.matrix_to_quat(lie.random_rotations(rng, n))
 
 
 class NumpySShape(SShape):
-    """The S-shape with ``integrate`` and ``log`` through 4x4 matrices (numpy): the
-    reference the compiled kernels are tested and benchmarked against."""
+    """The S-shape with ``integrate`` and ``log`` through 4x4 matrices and the motion
+    checks in numpy: the reference the compiled kernels are tested and benchmarked
+    against."""
+
+    def check_motions(
+        self,
+        world: CollisionWorld,
+        q0: Array,
+        twist: Array,
+        n: NDArray[np.int64],
+        low: Array | None = None,
+        high: Array | None = None,
+        fallback: Bool | None = None,
+    ) -> MotionCheck:
+        return Robot.check_motions(self, world, q0, twist, n, low, high, fallback)
 
     def integrate(self, q: Array, v: Array) -> Array:
         return self._integrate_numpy(q, v)

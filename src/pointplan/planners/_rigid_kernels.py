@@ -1,0 +1,370 @@
+"""Compiled (numba) rollout of a free-flying body of boxes (the S-shape) among boxes, seeing
+by ray casting (the ``local`` observation), with a PointNet actor: the whole rollout of
+:meth:`RolloutEngine.plan <pointplan.planners.rollout.RolloutEngine.plan>` in one call,
+escapes and sampled actions included. It computes what the step loop computes through the
+batched core, one function per piece:
+
+- the body among the boxes and its certified motions:
+  :mod:`pointplan.robots._body_kernels` (``_body_hits``, ``_check_motion``);
+- :func:`_move`, :func:`_edge_free`: ``q_free``'s move and the edge test of
+  :func:`~pointplan.planners.edges.edge_free`, with the same counts of configurations
+  checked;
+- :func:`_observe`: :class:`~pointplan.observers.rays.LocalRays`' observation for one
+  robot from its block of uniform draws (rays against the obstacle and wall boxes, the
+  thinning grid, the random subset, the robot frame) as the network's input;
+- the network: :func:`pointplan.planners._policy_kernels._network`.
+
+``tests/test_rigid_kernels.py`` compares each piece with the numpy code it replaces and
+whole rollouts with the step loop's.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ..geometry._kernels import _ray_box_row
+from ..robots._body_kernels import _body_hits, _check_motion, _distance, _integrate, _log, _norm, _rotation, _scratch
+from ._policy_kernels import (
+    END_GREEDY,
+    END_HORIZON,
+    END_STALLED,
+    END_TOL,
+    END_TOL_BLOCKED,
+    END_TOL_GOAL,
+    _network,
+    _workspace,
+)
+
+#: as in pointplan.robots.motion and pointplan.planners.base (literals for the compiler)
+_GRID_SLACK = 1e-9
+_IN_BOUNDS_EPS = 1e-9
+#: the rollout stopped within the goal tolerance exactly at the goal (nothing to connect)
+END_AT_GOAL = 7
+
+#: ``fparams`` of :func:`rollout_rigid`
+F_SUBSTEP, F_GOAL_TOL, F_STALL_DIST, F_RESOLUTION, F_S0, F_ESC_STILL, F_ESC_NOISE, F_NOISE, F_RANGE, F_SPACING = range(
+    10
+)
+#: ``iparams`` of :func:`rollout_rigid`
+(
+    I_HORIZON,
+    I_STALL_STEPS,
+    I_GREEDY,
+    I_CONNECT,
+    I_CLIP,
+    I_N_POINTS,
+    I_ACTION_DIM,
+    I_ESC_WINDOW,
+    I_ESC_STEPS,
+    I_SAMPLED,
+) = range(10)
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+
+
+@_jit
+def _move(q, tw, substep, clip_target, low, high, body, boxes, ws, new_q):  # type: ignore[no-untyped-def]
+    """``q_free`` for one robot: ``(collided, checks)``, the new configuration in ``new_q``."""
+    poses, twists = ws[8], ws[9]
+    if clip_target:
+        target = poses[2]
+        _integrate(q, tw, 1.0, target, ws[10])
+        moved = False
+        for a in range(3):
+            c = min(max(target[a], low[a]), high[a])
+            if c != target[a]:
+                moved = True
+                target[a] = c
+        if moved:  # aim at the clipped target: slide along the border
+            _log(q, target, twists[0])
+            tw = twists[0]
+    n = max(1, math.ceil(_norm(tw) / substep - _GRID_SLACK))
+    k, collided, checks = _check_motion(q, tw, n, True, low, high, body, boxes, ws, new_q)
+    if k <= 0:
+        for i in range(7):
+            new_q[i] = q[i]
+    return collided, checks
+
+
+@_jit
+def _edge_free(a, b, resolution, low, high, body, boxes, ws):  # type: ignore[no-untyped-def]
+    """``edge_free(robot, world, a, b, resolution, low, high)``: ``(free, checks)``."""
+    poses = ws[8]
+    v = ws[9][2]
+    _log(a, b, v)
+    d = _norm(v)
+    if d <= 1e-12:  # the configuration itself, plain and inside the bounds
+        for p in range(3):
+            if a[p] < low[p] - _IN_BOUNDS_EPS or a[p] > high[p] + _IN_BOUNDS_EPS:
+                return False, 1
+        return not _body_hits(a, body[1], body, boxes, ws), 1
+    start = poses[3]
+    _integrate(a, v, 0.0, start, ws[10])
+    m = max(1, math.ceil(d / resolution - _GRID_SLACK))
+    k, _, checks = _check_motion(start, v, m, True, low, high, body, boxes, ws, poses[2])
+    return k == m, checks
+
+
+# ------------------------------------------------------------------ the observation
+@_jit
+def _cast(q, rays, rboxes, low, high, max_range, hits, rot, scratch):  # type: ignore[no-untyped-def]
+    """``LocalRays.cast`` for one robot: rays from the body (``rays``: body-frame origins
+    and directions ``(R, 3)``) against the boxes ``rboxes`` (obstacles and wall slabs,
+    with a validity flag each); writes ``hits (R, 7)``: point, normal, and 1.0 where the
+    ray hit within range from an origin inside the bounds (else 0)."""
+    bo, bd = rays
+    box_c, box_r, box_h, valid = rboxes
+    o, d, t0, t1, ax = scratch
+    _rotation(q, rot)
+    nr, nk = bo.shape[0], box_c.shape[0]
+    for r in range(nr):
+        for i in range(3):
+            o[r, i] = rot[i, 0] * bo[r, 0] + rot[i, 1] * bo[r, 1] + rot[i, 2] * bo[r, 2] + q[i]
+            d[r, i] = rot[i, 0] * bd[r, 0] + rot[i, 1] * bd[r, 1] + rot[i, 2] * bd[r, 2]
+        dn = math.sqrt(d[r, 0] * d[r, 0] + d[r, 1] * d[r, 1] + d[r, 2] * d[r, 2])
+        for i in range(3):
+            d[r, i] = d[r, i] / dn
+    for r in range(nr):
+        _ray_box_row(o, d, r, box_c, box_r, box_h, t0, t1, ax)
+        best, kb = np.inf, -1
+        for k in range(nk):
+            if valid[k] and t1[k] >= 0.0 and t0[k] <= t1[k]:
+                tk = max(t0[k], 0.0)
+                if tk < best:
+                    best, kb = tk, k
+        inside_bounds = True
+        for i in range(3):
+            if not (o[r, i] > low[i] and o[r, i] < high[i]):
+                inside_bounds = False
+        if kb < 0 or not best <= max_range or not inside_bounds:
+            for i in range(7):
+                hits[r, i] = 0.0
+            continue
+        n0, n1, n2 = -d[r, 0], -d[r, 1], -d[r, 2]
+        if not t0[kb] < 0.0:  # entered through a face: its outward axis
+            n0, n1, n2 = box_r[kb, 0, ax[kb]], box_r[kb, 1, ax[kb]], box_r[kb, 2, ax[kb]]
+        nn = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if nn > 0:
+            n0, n1, n2 = n0 / nn, n1 / nn, n2 / nn
+        else:
+            n0, n1, n2 = -d[r, 0], -d[r, 1], -d[r, 2]
+        if n0 * d[r, 0] + n1 * d[r, 1] + n2 * d[r, 2] > 0:
+            n0, n1, n2 = -n0, -n1, -n2
+        for i in range(3):
+            hits[r, i] = o[r, i] + best * d[r, i]
+        hits[r, 3], hits[r, 4], hits[r, 5], hits[r, 6] = n0, n1, n2, 1.0
+
+
+@_jit
+def _thin(hits, spacing, kept):  # type: ignore[no-untyped-def]
+    """``thin_grid`` for one robot: the rays (in order) that are the first of their cell of
+    ``spacing`` over (point, normal) among the hits; returns how many (in ``kept``)."""
+    nr = hits.shape[0]
+    keys = np.empty(nr, np.int64)
+    which = np.empty(nr, np.int64)
+    m = 0
+    for r in range(nr):
+        if hits[r, 6] == 0.0:
+            continue
+        key = np.int64(0)
+        for i in range(6):
+            c = np.int64(math.floor(hits[r, i] / spacing + 0.5)) + 128
+            c = min(max(c, 0), 255)
+            key |= c << np.int64(8 * i)
+        keys[m] = key
+        which[m] = r
+        m += 1
+    order = np.argsort(keys[:m], kind="mergesort")  # stable: the first ray of a cell leads
+    first = np.zeros(nr, np.bool_)
+    for i in range(m):
+        if i == 0 or keys[order[i]] != keys[order[i - 1]]:
+            first[which[order[i]]] = True
+    count = 0
+    for r in range(nr):
+        if first[r]:
+            kept[count] = r
+            count += 1
+    return count
+
+
+@_jit
+def _observe(q, u, rays, rboxes, low, high, max_range, spacing, s32, obs, ows):  # type: ignore[no-untyped-def]
+    """The network's input for ``LocalRays.observe`` of one robot from the draws ``u`` (``R
+    + n`` uniform numbers: the subset's keys, then the duplicates' draws): ``obs (n, 6)``
+    float32, positions in steps (``/ s32``) and normals in the robot frame (all zero when
+    nothing is seen). ``ows``: :func:`_obs_scratch`."""
+    hits, kept, rot, scratch = ows
+    _cast(q, rays, rboxes, low, high, max_range, hits, rot, scratch)
+    count = _thin(hits, spacing, kept)
+    n, nr = obs.shape[0], hits.shape[0]
+    if count == 0:
+        for i in range(n):
+            for j in range(6):
+                obs[i, j] = 0.0
+        return 0
+    rank = np.argsort(u[:count])
+    for i in range(n):
+        pos = rank[i] if i < count else int(u[nr + i] * count)
+        r = kept[pos]
+        for a in range(3):
+            pb = rot[0, a] * (hits[r, 0] - q[0]) + rot[1, a] * (hits[r, 1] - q[1]) + rot[2, a] * (hits[r, 2] - q[2])
+            nb = rot[0, a] * hits[r, 3] + rot[1, a] * hits[r, 4] + rot[2, a] * hits[r, 5]
+            obs[i, a] = np.float32(pb) / s32
+            obs[i, 3 + a] = np.float32(nb)
+    return count
+
+
+@_jit
+def _obs_scratch(n_rays, n_boxes):  # type: ignore[no-untyped-def]
+    """Scratch of :func:`_observe`: hits, kept rays, rotation, and the casting's rays and
+    per-box rows."""
+    return (
+        np.empty((n_rays, 7)),
+        np.empty(n_rays, np.int64),
+        np.empty((3, 3)),
+        (
+            np.empty((n_rays, 3)),
+            np.empty((n_rays, 3)),
+            np.empty(max(n_boxes, 1)),
+            np.empty(max(n_boxes, 1)),
+            np.empty(max(n_boxes, 1), np.int8),
+        ),
+    )
+
+
+# ------------------------------------------------------------------ one step's action
+@_jit
+def _act(q, goal, u, noise, sampled, rays, rboxes, low, high, fparams, iparams, scale, wflat, layout, ows, nws):  # type: ignore[no-untyped-def]
+    """The action (float32 ``(action_dim,)``, a view into ``nws``) at ``q`` toward ``goal``
+    for the draws ``u``: the observation, the goal input ``log(q^-1 goal) / scale``, the
+    network."""
+    h = nws[0]
+    vec = nws[4]
+    width, features = layout[0], layout[1]
+    obs = ows[4]
+    _observe(
+        q, u, rays, rboxes, low, high, fparams[F_RANGE], fparams[F_SPACING], np.float32(fparams[F_S0]), obs, ows[:4]
+    )
+    np.dot(obs, wflat[: features * width].reshape(features, width), h)
+    b0 = wflat[features * width : features * width + width]
+    for p in range(h.shape[0]):
+        for o in range(width):
+            h[p, o] += b0[o]
+    g = np.empty(6)
+    _log(q, goal, g)
+    z = vec[width + features + width :]
+    for i in range(6):
+        z[i] = np.float32(g[i] / scale[i])
+    return _network(nws, wflat, layout, 6, iparams[I_ACTION_DIM], noise, sampled)
+
+
+@_jit
+def _finish(end, path, t, goal, greedy, connect, resolution, low, high, body, boxes, ws):  # type: ignore[no-untyped-def]
+    """The end of a rollout that stopped at ``path[t]`` with code ``end``: the goal test
+    there (``greedy``), the edge to the goal from within the tolerance (``connect``), the
+    goal appended where the path ends there. Returns ``(end, rows, checks)``."""
+    checks = 0
+    if greedy and end in (END_HORIZON, END_STALLED):  # the goal from where the rollout stopped
+        ok, c = _edge_free(path[t], goal, resolution, low, high, body, boxes, ws)
+        checks += c
+        if ok:
+            end = END_GREEDY
+    if end == END_TOL and connect:
+        if _distance(path[t], goal, ws[9][0]) <= 0.0:
+            end = END_AT_GOAL
+        else:
+            ok, c = _edge_free(path[t], goal, resolution, low, high, body, boxes, ws)
+            checks += c
+            end = END_TOL_GOAL if ok else END_TOL_BLOCKED
+    rows = t + 1
+    if end in (END_GREEDY, END_TOL_GOAL):
+        for i in range(7):
+            path[rows, i] = goal[i]
+        rows += 1
+    return end, rows, checks
+
+
+@_jit
+def rollout_rigid(
+    q0, goal, low, high, boxes, rboxes, body, rays, wflat, layout, scale, fparams, iparams, stream, normals, path
+):  # type: ignore[no-untyped-def]
+    """One rollout of ``RolloutEngine.plan`` (one attempt) for the S-shape seeing rays:
+    at each configuration (the start included), with ``I_GREEDY``, the certified edge to
+    the goal (stop at the goal when free); the action for the step's draws (``stream``:
+    ``R + n`` uniform numbers a step; ``normals (horizon, action_dim)``: the normal draws
+    of sampled actions, one row a step, used where ``I_SAMPLED``: scaled by
+    ``F_ESC_NOISE`` during an escape, by ``F_NOISE`` otherwise); ``q_free``'s move; stop
+    within the goal tolerance, stalled or at the horizon; an escape of ``I_ESC_STEPS``
+    sampled steps after a step that ended less than ``F_ESC_STILL`` from where the robot
+    was ``I_ESC_WINDOW`` steps before. Then the goal test where it stopped and, with
+    ``I_CONNECT``, the edge to the goal from within the tolerance.
+
+    ``boxes``: the obstacle boxes ``(centres, rotations, half sides)``; ``rboxes``: the
+    boxes rays hit (obstacles and wall slabs) and a validity flag each; ``body``:
+    ``(centres, half sides, corner map)`` of the robot's boxes; ``rays``: body-frame ray
+    origins and directions. Writes the path to ``path`` (``horizon + 2`` rows) and
+    returns ``(end code, rows, checks, escapes)``."""
+    horizon, stall_steps = iparams[I_HORIZON], iparams[I_STALL_STEPS]
+    greedy, connect, clip_target = iparams[I_GREEDY] != 0, iparams[I_CONNECT] != 0, iparams[I_CLIP] != 0
+    esc_window, esc_steps, sampled = iparams[I_ESC_WINDOW], iparams[I_ESC_STEPS], iparams[I_SAMPLED] != 0
+    substep, goal_tol, resolution = fparams[F_SUBSTEP], fparams[F_GOAL_TOL], fparams[F_RESOLUTION]
+    n_points, adim = iparams[I_N_POINTS], iparams[I_ACTION_DIM]
+    nr = rays[0].shape[0]
+    blk = nr + n_points
+    ws = _scratch(body[0].shape[0], boxes[0].shape[0])
+    o4 = _obs_scratch(nr, rboxes[0].shape[0])
+    ows = (o4[0], o4[1], o4[2], o4[3], np.empty((n_points, 6), np.float32))
+    nws = _workspace(n_points, layout, 6)
+    noise = np.zeros(adim, np.float32)
+    tw = np.empty(6)
+    tmp = np.empty(6)
+    for i in range(7):
+        path[0, i] = q0[i]
+    checks, escapes, left, t = 0, 0, 0, 0
+    end = END_HORIZON
+    while t < horizon:
+        q = path[t]
+        if greedy:
+            ok, c = _edge_free(q, goal, resolution, low, high, body, boxes, ws)
+            checks += c
+            if ok:
+                end = END_GREEDY
+                break
+        escaping = left > 0
+        if sampled:
+            sd = fparams[F_ESC_NOISE] if escaping else fparams[F_NOISE]
+            for i in range(adim):
+                noise[i] = np.float32(sd * normals[t, i])
+        u = stream[t * blk : (t + 1) * blk]
+        a = _act(q, goal, u, noise, sampled, rays, rboxes, low, high, fparams, iparams, scale, wflat, layout, ows, nws)
+        if escaping:
+            left -= 1
+        for i in range(6):
+            tw[i] = np.float64(min(max(a[i], np.float32(-1.0)), np.float32(1.0))) * scale[i]
+        collided, c = _move(q, tw, substep, clip_target, low, high, body, boxes, ws, path[t + 1])
+        checks += c
+        t += 1
+        new_q = path[t]
+        if not collided and _distance(new_q, goal, tmp) < goal_tol:
+            end = END_TOL
+            break
+        if (
+            stall_steps > 0
+            and t >= stall_steps
+            and _distance(new_q, path[t - stall_steps], tmp) < fparams[F_STALL_DIST]
+        ):
+            end = END_STALLED
+            break
+        still = esc_steps > 0 and t >= esc_window and left == 0
+        if still and _distance(new_q, path[t - esc_window], tmp) < fparams[F_ESC_STILL]:
+            left = esc_steps
+            escapes += 1
+    end, rows, c = _finish(end, path, t, goal, greedy, connect, resolution, low, high, body, boxes, ws)
+    checks += c
+    return end, rows, checks, escapes
+
+
+__all__ = ["END_AT_GOAL", "rollout_rigid"]

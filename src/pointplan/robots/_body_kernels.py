@@ -1,0 +1,197 @@
+"""Compiled (numba) kernels of a free-flying body made of boxes (the S-shape) among
+obstacle boxes: the body's boxes at a pose, grown for a motion as
+:meth:`Robot.grown_parts <pointplan.robots.base.Robot.grown_parts>` grows them
+(:func:`_grow`), against the obstacles by the separating-axis test of
+:func:`pointplan.geometry._kernels._obb_row` (:func:`_body_hits`), and the certified motion
+check of :func:`pointplan.robots.motion.check_motions` (grown samples, the start fallback,
+the bounds) for one motion (:func:`_check_motion`, which stops at the first sample that
+decides it: the answer and the count of configurations are those of the numpy check, which
+computes every sample) or a batch (:func:`check_motions_boxes`). ``SShape.check_motions``
+takes them in scenes of boxes; ``tests/test_rigid_kernels.py`` compares them with the numpy
+check (``NumpySShape``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ..geometry._kernels import _obb_row
+from ..geometry._se3_kernels import _pose_integrate_flat, _pose_log_flat
+
+#: as in pointplan.robots.motion (literals for the compiler)
+_CONTACT_MARGIN = 1e-5
+_BOUNDS_EPS = 1e-12
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+
+
+# ------------------------------------------------------------------ poses
+@_jit
+def _rotation(q, rot):  # type: ignore[no-untyped-def]
+    """``lie.quat_to_matrix`` of the pose ``q (7,)`` into ``rot (3, 3)``."""
+    x, y, z, w = q[3], q[4], q[5], q[6]
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    rot[0, 0], rot[0, 1], rot[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)
+    rot[1, 0], rot[1, 1], rot[1, 2] = 2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)
+    rot[2, 0], rot[2, 1], rot[2, 2] = 2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)
+
+
+@_jit
+def _integrate(q, v, s, out, vs):  # type: ignore[no-untyped-def]
+    """``out = q * exp(s v)`` for one pose and one twist (``vs``: scratch ``(1, 6)``)."""
+    for i in range(6):
+        vs[0, i] = v[i] * s
+    _pose_integrate_flat(q.reshape(1, 7), vs, out.reshape(1, 7))
+
+
+@_jit
+def _log(q0, q1, out):  # type: ignore[no-untyped-def]
+    """``out = log(q0^-1 q1)`` (body twist ``(6,)``)."""
+    _pose_log_flat(q0.reshape(1, 7), q1.reshape(1, 7), out.reshape(1, 6))
+
+
+@_jit
+def _norm(v):  # type: ignore[no-untyped-def]
+    s = 0.0
+    for i in range(v.shape[0]):
+        s += v[i] * v[i]
+    return math.sqrt(s)
+
+
+@_jit
+def _distance(q0, q1, tw):  # type: ignore[no-untyped-def]
+    """The geodesic distance ``|log(q0^-1 q1)|`` (``tw``: scratch ``(6,)``)."""
+    _log(q0, q1, tw)
+    return _norm(tw)
+
+
+# ------------------------------------------------------------------ the body among boxes
+@_jit
+def _grow(seg, reach, halfs0, cv, out):  # type: ignore[no-untyped-def]
+    """Half sides of the body's boxes grown for the sub-step twist ``seg`` (``Robot.grown_parts``)
+    plus the contact margin, into ``out (P, 3)``; ``cv (6, P * 8 * 3)``: the twist's
+    map to the corners' velocities in each box's axes (``Robot._corner_velocity``)."""
+    wn = math.sqrt(seg[3] * seg[3] + seg[4] * seg[4] + seg[5] * seg[5])
+    c2 = (0.5 * reach * reach) * wn
+    for p in range(halfs0.shape[0]):
+        g0 = g1 = g2 = -np.inf
+        for k in range(8):
+            base = (p * 8 + k) * 3
+            l0 = l1 = l2 = 0.0
+            for i in range(6):
+                l0 += seg[i] * cv[i, base]
+                l1 += seg[i] * cv[i, base + 1]
+                l2 += seg[i] * cv[i, base + 2]
+            extra = c2 * math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
+            g0 = max(g0, reach * abs(l0) + extra)
+            g1 = max(g1, reach * abs(l1) + extra)
+            g2 = max(g2, reach * abs(l2) + extra)
+        out[p, 0] = halfs0[p, 0] + g0 + _CONTACT_MARGIN
+        out[p, 1] = halfs0[p, 1] + g1 + _CONTACT_MARGIN
+        out[p, 2] = halfs0[p, 2] + g2 + _CONTACT_MARGIN
+
+
+@_jit
+def _body_hits(q, halfs, body, boxes, ws):  # type: ignore[no-untyped-def]
+    """Does the body at ``q`` with box half sides ``halfs (P, 3)`` overlap an obstacle box?
+    ``body``: ``(centres (P, 3), half sides, corner map)``, the boxes axis-aligned in the
+    body frame; ``boxes``: ``(centres, rotations, half sides)``; ``ws``: :func:`_scratch`."""
+    c0 = body[0]
+    box_c, box_r, box_h = boxes
+    rot, bc, br, row, rel, absr, t = ws[0], ws[1], ws[2], ws[3], ws[4], ws[5], ws[6]
+    if box_c.shape[0] == 0:
+        return False
+    _rotation(q, rot)
+    for p in range(c0.shape[0]):
+        for a in range(3):
+            bc[p, a] = rot[a, 0] * c0[p, 0] + rot[a, 1] * c0[p, 1] + rot[a, 2] * c0[p, 2] + q[a]
+            for b in range(3):
+                br[p, a, b] = rot[a, b]
+    for p in range(c0.shape[0]):  # noqa: SIM110 (a loop, not any() of a generator, for the compiler)
+        if _obb_row(bc, br, halfs, p, box_c, box_r, box_h, row, True, rel, absr, t):
+            return True
+    return False
+
+
+@_jit
+def _scratch(n_parts, n_boxes):  # type: ignore[no-untyped-def]
+    """The scratch arrays of :func:`_body_hits` and the motion checks, allocated once per
+    rollout: rotation, box centres and rotations, a row of overlaps, the separating-axis
+    scratch, three sets of grown half sides, four poses, three twists and the scratch of
+    :func:`_integrate`."""
+    return (
+        np.empty((3, 3)),
+        np.empty((n_parts, 3)),
+        np.empty((n_parts, 3, 3)),
+        np.empty(max(n_boxes, 1), np.bool_),
+        np.empty((3, 3)),
+        np.empty((3, 3)),
+        np.empty(3),
+        np.empty((3, n_parts, 3)),
+        np.empty((4, 7)),
+        np.empty((3, 6)),
+        np.empty((1, 6)),
+    )
+
+
+@_jit
+def _out_of_bounds(q, low, high):  # type: ignore[no-untyped-def]
+    for a in range(3):
+        mid = (high[a] + low[a]) / 2
+        half = (high[a] - low[a]) / 2 + _BOUNDS_EPS
+        if abs(q[a] - mid) > half:
+            return True
+    return False
+
+
+@_jit
+def _check_motion(q0, tw, n, fallback, low, high, body, boxes, ws, last):  # type: ignore[no-untyped-def]
+    """``check_motions`` for one motion ``q0 exp(s tw)`` in ``n`` sub-steps: returns ``(k,
+    collided, checks)`` (certified free on ``[0, k / n]``) and leaves the configuration
+    at ``k / n`` in ``last`` (when ``k >= 0``)."""
+    halfs0, cv = body[1], body[2]
+    grown, poses, twists, vs = ws[7], ws[8], ws[9], ws[10]
+    seg = twists[1]
+    for i in range(6):
+        seg[i] = tw[i] / n
+    _grow(seg, 0.5, halfs0, cv, grown[0])
+    checks = n + 1
+    qj = poses[0]
+    for j in range(n + 1):
+        _integrate(q0, tw, min(j / n, 1.0), qj, vs)
+        bad = _body_hits(qj, grown[0], body, boxes, ws)
+        if j == 0 and bad and fallback:  # the start too close for its grown check
+            checks += 2
+            _grow(seg, 0.0, halfs0, cv, grown[1])
+            _grow(seg, 1.0, halfs0, cv, grown[2])
+            q1 = poses[1]
+            _integrate(q0, tw, min(1 / n, 1.0), q1, vs)
+            bad = _body_hits(qj, grown[1], body, boxes, ws) or _body_hits(q1, grown[2], body, boxes, ws)
+        if bad or _out_of_bounds(qj, low, high):
+            return j - 1, bad, checks
+        for i in range(7):
+            last[i] = qj[i]
+    return n, False, checks
+
+
+@_jit
+def check_motions_boxes(q0, tw, n, fallback, low, high, body, box_c, box_r, box_h, stacked, configs, out):  # type: ignore[no-untyped-def]
+    """:func:`_check_motion` for motions ``q0 (N, 7)``, ``tw (N, 6)`` in ``n (N,)`` sub-steps,
+    ``fallback (N,)``, bounds ``low, high (N, 3)``, against the boxes of one scene (``(1,
+    K, ...)``) or of scene ``i`` for motion ``i`` (``stacked``). Writes every sample
+    ``configs (N, J, 7)`` (past a motion's own ``n`` its end, as the numpy check lays
+    them out) and ``out (N, 3)``: certified sub-steps, collided (0 or 1), checks."""
+    nm, nj = configs.shape[0], configs.shape[1]
+    ws = _scratch(body[0].shape[0], box_c.shape[1])
+    last = np.empty(7)
+    for i in range(nm):
+        s = i if stacked else 0
+        boxes = (box_c[s], box_r[s], box_h[s])
+        k, hit, c = _check_motion(q0[i], tw[i], n[i], fallback[i], low[i], high[i], body, boxes, ws, last)
+        out[i, 0], out[i, 1], out[i, 2] = k, hit, c
+        for j in range(nj):
+            _integrate(q0[i], tw[i], min(j / n[i], 1.0), configs[i, j], ws[10])

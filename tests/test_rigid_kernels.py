@@ -1,0 +1,248 @@
+"""The compiled rollout of the S-shape seeing rays (planners/_rigid_kernels.py) against the
+numpy code it replaces: each piece with the same inputs, then whole rollouts against the
+step loop through the batched core (PyTorch network)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pointplan.envs.core import q_free
+from pointplan.evaluation import check_path
+from pointplan.models.policy import NumpyPointNetActor
+from pointplan.observers.rays import LocalRays, WideRays
+from pointplan.planners import _rigid_kernels as RK
+from pointplan.planners import make_planner
+from pointplan.planners._policy_kernels import _workspace, pack_weights
+from pointplan.planners.edges import edge_free
+from pointplan.planners.rollout_compiled import CompiledRays
+from pointplan.robots import _body_kernels as BK
+from pointplan.robots.motion import CONTACT_MARGIN
+from pointplan.robots.sshape import SShape
+from pointplan.scenes.scenarios import make_scenario
+from pointplan.scenes.scene import Problem
+
+
+@pytest.fixture(scope="module")
+def problems() -> list[Problem]:
+    return make_scenario("boxes3d", robot="sshape").problems("test", 16, seed=2026)
+
+
+@pytest.fixture(scope="module")
+def planner(one_torch_thread: None) -> object:
+    return make_planner("policy", SShape(), observation="local")
+
+
+def _scene_args(planner: object, p: Problem) -> tuple:
+    compiled = planner.engine.compiled_rays()  # type: ignore[attr-defined]
+    assert isinstance(compiled, CompiledRays)
+    return compiled, *compiled._scene_inputs(p.scene)
+
+
+def _free_configs(p: Problem, n: int, seed: int) -> np.ndarray:
+    robot = SShape()
+    rng = np.random.default_rng(seed)
+    return robot.sample_free(p.scene.world, rng, n, p.scene.low, p.scene.high)
+
+
+def test_grown_boxes_are_grown_parts() -> None:
+    robot = SShape()
+    rng = np.random.default_rng(0)
+    body = (robot.parts.box_centers, robot.parts.box_halfs, np.ascontiguousarray(robot._corner_velocity))
+    out = np.empty((5, 3))
+    for _ in range(50):
+        seg = rng.normal(size=6) * rng.choice([1e-3, 1e-2, 0.1])
+        for reach in (0.0, 0.5, 1.0):
+            BK._grow(seg, reach, body[1], body[2], out)
+            ref = robot.grown_parts(seg, reach)[1] + CONTACT_MARGIN
+            np.testing.assert_allclose(out, ref, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("observer_cls", [LocalRays, WideRays])
+def test_observation_is_local_rays(problems: list[Problem], observer_cls: type) -> None:
+    """The compiled observation of one robot from a block of draws equals
+    ``LocalRays.observe`` with a generator that gives the same draws, to the last bit
+    (positions in steps, as the network reads them)."""
+    robot = SShape()
+    observer = observer_cls(robot)
+    rays = (np.ascontiguousarray(observer.body_origins), np.ascontiguousarray(observer.body_dirs))
+    s0 = np.float32(robot.action_scale[0])
+    counts = []
+    for k, p in enumerate(problems[:6]):
+        observer.bind([p.scene])
+        rw = observer.ray_world(p.scene)
+        rboxes = (rw.box_c, rw.box_r, rw.box_h, np.any(rw.box_h > 0, -1))
+        ows = RK._obs_scratch(len(rays[0]), len(rw.box_c))
+        obs = np.empty((observer.n_points, 6), np.float32)
+        qs = _free_configs(p, 20, k)
+        qs[:3, :3] = p.scene.low + 0.01  # origins of the body poke out of the bounds
+        for i, q in enumerate(qs):
+            u = np.random.default_rng([k, i]).random(len(rays[0]) + observer.n_points)
+            ref = observer.observe(q[None], np.random.default_rng([k, i]))[0]
+            ref[:, :3] /= s0
+            count = RK._observe(
+                q, u, rays, rboxes, p.scene.low, p.scene.high, observer.max_range, observer.spacing, s0, obs, ows
+            )
+            assert np.array_equal(obs, ref)
+            counts.append(count)
+    assert min(counts) < observer.n_points < max(counts)  # padded with duplicates and subsets both
+
+
+def test_moves_and_edges_are_q_free_and_edge_free(planner: object, problems: list[Problem]) -> None:
+    robot = SShape()
+    rng = np.random.default_rng(3)
+    kinds = set()
+    for k, p in enumerate(problems[:8]):
+        compiled, boxes, rboxes, low, high = _scene_args(planner, p)
+        ws = BK._scratch(5, len(boxes[0]))
+        qs = _free_configs(p, 25, 10 + k)
+        for i, q in enumerate(qs):
+            tw = rng.uniform(-1, 1, 6) * robot.action_scale * rng.choice([0.1, 1.0, 3.0])
+            ref_q, ref_hit, ref_n = q_free(robot, p.scene.world, q[None], tw[None], low[None], high[None], 0.01)
+            new_q = np.empty(7)
+            hit, n = RK._move(q, tw, 0.01, True, low, high, compiled.body, boxes, ws, new_q)
+            assert (hit, n) == (bool(ref_hit[0]), int(ref_n[0]))
+            assert np.array_equal(new_q, ref_q[0])
+            b = qs[(i + 1) % len(qs)] if i % 5 else q
+            ok, c = edge_free(robot, p.scene.world, q, b, 0.01, low, high)
+            assert RK._edge_free(q, b, 0.01, low, high, compiled.body, boxes, ws) == (ok, c)
+            kinds.add((hit, np.array_equal(new_q, q), ok))
+    assert len(kinds) >= 4  # moves that collide, that are stopped at once, free edges and blocked ones
+
+
+def test_network_is_the_numpy_actor(planner: object, problems: list[Problem]) -> None:
+    fast: NumpyPointNetActor = planner.engine.fast  # type: ignore[attr-defined]
+    wflat, layout = pack_weights(fast.inp, fast.hidden, fast.head)
+    rng = np.random.default_rng(4)
+    compiled, boxes, rboxes, low, high = _scene_args(planner, problems[0])
+    observer = planner.engine.observer  # type: ignore[attr-defined]
+    nws = _workspace(observer.n_points, layout, 6)
+    ows4 = RK._obs_scratch(len(compiled.rays[0]), len(rboxes[0]))
+    ows = (*ows4, np.empty((observer.n_points, 6), np.float32))
+    fparams = np.zeros(10)
+    fparams[[RK.F_S0, RK.F_RANGE, RK.F_SPACING]] = 0.07, observer.max_range, observer.spacing
+    iparams = np.zeros(10, np.int64)
+    iparams[RK.I_ACTION_DIM] = 6
+    robot = SShape()
+    for q in _free_configs(problems[0], 10, 5):
+        goal = _free_configs(problems[0], 1, int(rng.integers(1000)))[0]
+        u = rng.random(compiled.blk)
+        noise = rng.normal(size=6).astype(np.float32)
+        for sampled in (False, True):
+            a = RK._act(q, goal, u, noise, sampled, compiled.rays, rboxes, low, high, fparams, iparams,
+                        compiled.scale, wflat, layout, ows, nws).copy()  # fmt: skip
+            obs_in = ows[4].copy()
+            goal_in = (robot.log(q, goal) / robot.action_scale).astype(np.float32)
+            ref = fast(obs_in, goal_in, noise if sampled else None)
+            np.testing.assert_allclose(a, ref, rtol=0, atol=2e-6)
+
+
+def test_rollouts_are_the_step_loops(planner: object, problems: list[Problem]) -> None:
+    """Whole rollouts (greedy goal test, escapes, goal connection) against the step loop
+    through the batched core with the PyTorch network: the networks differ by about 1e-7,
+    so a rollout may part where that decides a step; nearly all agree, and every compiled
+    success is a path the evaluator accepts."""
+    ref = make_planner("policy", SShape(), observation="local", compiled=False)
+    same, escapes, solved = 0, 0, 0
+    for p in problems:
+        a, b = planner.plan(p), ref.plan(p)  # type: ignore[attr-defined]
+        assert "compiled" in a.info["time_split"] and "time_split" not in b.info
+        if a.success:
+            solved += 1
+            assert check_path(SShape(), p, a.path)
+        if a.success == b.success and a.path.shape == b.path.shape and np.allclose(a.path, b.path, atol=1e-5):
+            same += 1
+            assert a.collision_checks == b.collision_checks
+            assert {k: v for k, v in a.info.items() if k != "time_split"} == {
+                k: v for k, v in b.info.items() if k != "time_split"
+            }
+        escapes += a.info["escapes"]
+    assert same >= len(problems) - 2
+    assert escapes > 0 and solved >= len(problems) // 2
+
+
+def test_sampled_attempts_are_the_step_loops(problems: list[Problem], one_torch_thread: None) -> None:
+    kw = {"observation": "local", "attempts": 3, "escape": 0}
+    fast = make_planner("policy", SShape(), **kw)
+    ref = make_planner("policy", SShape(), compiled=False, **kw)
+    same, retried = 0, 0
+    for p in problems[:10]:
+        a, b = fast.plan(p), ref.plan(p)
+        retried += a.info.get("attempts", 1) > 1
+        same += a.success == b.success and a.path.shape == b.path.shape and np.allclose(a.path, b.path, atol=1e-5)
+    assert retried > 0 and same >= 8
+
+
+def test_other_obstacles_go_through_the_step_loop(planner: object) -> None:
+    """A scene with obstacles other than boxes is not compiled: the step loop plans it."""
+    p = make_scenario("synthetic3d", robot="sshape").problems("test", 1, seed=0)[0]
+    assert not all(type(o).__name__ == "Box" for o in p.scene.obstacles)
+    res = planner.plan(p)  # type: ignore[attr-defined]
+    assert "compiled" not in res.info.get("time_split", {})
+
+
+def test_plan_many_compiles_the_box_scenes(planner: object, problems: list[Problem]) -> None:
+    """plan_many plans scenes of boxes one by one through the compiled rollout (the same
+    results as plan) and the others in lockstep, and keeps the order."""
+    other = make_scenario("synthetic3d", robot="sshape").problems("test", 2, seed=0)
+    mixed = [problems[0], other[0], problems[1], other[1]]
+    many = planner.plan_many(mixed)  # type: ignore[attr-defined]
+    for i in (0, 2):
+        one = planner.plan(mixed[i])  # type: ignore[attr-defined]
+        assert np.array_equal(many[i].path, one.path) and "compiled" in many[i].info["time_split"]
+    for i in (1, 3):
+        assert "time_split" not in many[i].info
+        np.testing.assert_array_equal(many[i].path[0], mixed[i].start)
+
+
+def test_compiled_motion_checks_are_the_numpy_ones(problems: list[Problem]) -> None:
+    """SShape.check_motions in scenes of boxes (one scene, and stacked scenes one motion
+    each) against the numpy check (``Robot.check_motions`` with the same robot): the same
+    certified sub-steps, collisions, counts and samples, with and without bounds and the
+    start fallback."""
+    from pointplan.geometry.collision import CollisionWorld
+    from pointplan.robots.base import Robot
+
+    fast = SShape()
+
+    class ref:  # noqa: N801 (the numpy check on the same robot)
+        check_motions = staticmethod(lambda *a: Robot.check_motions(fast, *a))
+
+    rng = np.random.default_rng(7)
+    kinds = set()
+    scenes = [p.scene for p in problems[:6]]
+    for scene in scenes:
+        assert scene.world.boxes_only
+        q0 = np.concatenate([_free_configs(Problem(scene, problems[0].start, problems[0].goal), 30, 1),
+                             fast.sample_uniform(rng, 10, scene.low - 0.05, scene.high + 0.05)])  # fmt: skip
+        tw = rng.normal(size=(40, 6)) * rng.choice([0.01, 0.07, 0.4], size=(40, 1))
+        n = rng.integers(1, 30, 40)
+        fb = rng.random(40) < 0.7
+        for args in ((), (scene.low, scene.high), (scene.low, scene.high, fb)):
+            a = fast.check_motions(scene.world, q0, tw, n, *args)
+            b = ref.check_motions(scene.world, q0, tw, n, *args)
+            assert np.array_equal(a.free, b.free) and np.array_equal(a.collided, b.collided)
+            assert np.array_equal(a.checks, b.checks) and np.array_equal(a.configs, b.configs)
+            kinds |= set(zip((a.free == n).tolist(), a.collided.tolist(), (a.free < 0).tolist()))
+    stacked = CollisionWorld.stack([s.world for s in scenes])
+    q0 = np.stack([fast.sample_uniform(rng, 1, s.low, s.high)[0] for s in scenes])
+    tw = rng.normal(size=(len(scenes), 6)) * 0.1
+    lows, highs = np.stack([s.low for s in scenes]), np.stack([s.high for s in scenes])
+    a = fast.check_motions(stacked, q0, tw, np.full(len(scenes), 10), lows, highs)
+    b = ref.check_motions(stacked, q0, tw, np.full(len(scenes), 10), lows, highs)
+    assert (
+        np.array_equal(a.free, b.free) and np.array_equal(a.checks, b.checks) and np.array_equal(a.configs, b.configs)
+    )
+    assert len(kinds) >= 3
+
+
+def test_a_padded_body_grows_from_its_own_corners() -> None:
+    """A padded copy made after the body's corner map was built computes its own (the
+    copy used to keep the unpadded corners, and grew its boxes too little)."""
+    robot = SShape()
+    seg = np.full(6, 0.01)
+    robot.grown_parts(seg, 0.5)  # builds the corner map
+    padded = robot.padded(0.05)
+    fresh = SShape()
+    fresh.parts = padded.parts
+    np.testing.assert_array_equal(padded.grown_parts(seg, 0.5)[1], fresh.grown_parts(seg, 0.5)[1])
