@@ -246,3 +246,48 @@ def test_a_padded_body_grows_from_its_own_corners() -> None:
     fresh = SShape()
     fresh.parts = padded.parts
     np.testing.assert_array_equal(padded.grown_parts(seg, 0.5)[1], fresh.grown_parts(seg, 0.5)[1])
+
+
+class _PlainSShape(SShape):
+    """The S-shape with every check in numpy (the same integrate and log)."""
+
+    def check_motions(self, *args: object, **kw: object):  # type: ignore[no-untyped-def]
+        from pointplan.robots.base import Robot
+
+        return Robot.check_motions(self, *args, **kw)  # type: ignore[arg-type]
+
+    def march_compiled(self, *args: object) -> None:
+        return None
+
+    def nearest(self, nodes: np.ndarray, q: np.ndarray) -> tuple[int, np.ndarray]:
+        from pointplan.robots.base import Robot
+
+        return Robot.nearest(self, nodes, q)
+
+
+def test_compiled_march_and_nearest_are_the_numpy_ones(problems: list[Problem]) -> None:
+    """march (Bi-RRT's extend and connect, the edges of every planner) and the nearest
+    node, compiled for the S-shape among boxes, against numpy: the same nodes, answers
+    and counts; and Bi-RRT plans the same paths either way."""
+    from pointplan.planners.base import march
+    from pointplan.planners.birrt import BiRRT
+
+    fast, plain = SShape(), _PlainSShape()
+    rng = np.random.default_rng(11)
+    kinds = set()
+    for k, p in enumerate(problems[:5]):
+        qs = _free_configs(p, 24, 20 + k)
+        for i in range(len(qs) - 1):
+            step = float(rng.choice([0.07, 0.3, 1e12]))
+            budget = None if i % 3 else int(rng.integers(1, 5))
+            a = march(fast, p, qs[i], qs[i + 1], step, 0.01, budget)
+            b = march(plain, p, qs[i], qs[i + 1], step, 0.01, budget)
+            assert np.array_equal(a.nodes, b.nodes) and (a.reached, a.checks) == (b.reached, b.checks)
+            kinds.add((a.reached, len(a.nodes) > 0))
+        i, v = fast.nearest(qs, qs[0] * 0.9 + 0.1)
+        j, w = plain.nearest(qs, qs[0] * 0.9 + 0.1)
+        assert i == j and np.allclose(v, w, rtol=0, atol=1e-15)
+    assert len(kinds) >= 3
+    for p in problems[:3]:
+        a, b = BiRRT(fast, max_nodes=2000).plan(p), BiRRT(plain, max_nodes=2000).plan(p)
+        assert a.success == b.success and np.array_equal(a.path, b.path) and a.collision_checks == b.collision_checks

@@ -23,6 +23,7 @@ ENV_IDS = {
     "slotfixed": "pointplan/SlotFixed-v0",
     "slotclassic": "pointplan/SlotClassic-v0",
     "qureshi3d": "pointplan/Qureshi3D-v0",
+    "cluttered3d": "pointplan/Cluttered3D-v0",
 }
 
 

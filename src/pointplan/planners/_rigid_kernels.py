@@ -288,9 +288,9 @@ def _finish(end, path, t, goal, greedy, connect, resolution, low, high, body, bo
 
 
 @_jit
-def rollout_rigid(
+def rollout_rigid(  # type: ignore[no-untyped-def]
     q0, goal, low, high, boxes, rboxes, body, rays, wflat, layout, scale, fparams, iparams, stream, normals, path
-):  # type: ignore[no-untyped-def]
+):
     """One rollout of ``RolloutEngine.plan`` (one attempt) for the S-shape seeing rays:
     at each configuration (the start included), with ``I_GREEDY``, the certified edge to
     the goal (stop at the goal when free); the action for the step's draws (``stream``:

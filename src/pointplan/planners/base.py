@@ -113,6 +113,9 @@ def march(
     q0 = np.asarray(q0, np.float64)
     q1 = np.asarray(q1, np.float64)
     v = robot.log(q0, q1) if twist is None else np.asarray(twist, np.float64)
+    fast = robot.march_compiled(world, q0, q1, v, step, resolution, max_steps, low, high)  # type: ignore[arg-type]
+    if fast is not None:
+        return March(*fast)
     d = float(np.linalg.norm(v))
     cdim = q0.shape[-1]
     if d <= 1e-12:

@@ -95,9 +95,7 @@ class _Tree:
     def nearest(self, robot: Robot, q: Array) -> tuple[int, Array]:
         """Index of the node nearest to ``q`` and the twist from it to ``q``."""
         if self.n < _KD_MIN:
-            v = robot.log(self.nodes[: self.n], q[None])
-            i = int(np.argmin(np.einsum("ij,ij->i", v, v)))
-            return i, v[i]
+            return robot.nearest(self.nodes[: self.n], q)
         if self.n >= 2 * self._kd_n:  # rebuild when the tree has doubled
             from scipy.spatial import cKDTree
 
@@ -107,9 +105,8 @@ class _Tree:
         assert self._kd is not None
         _, cand = self._kd.query(_embed(robot, q), k=1 if exact else _KD_CANDIDATES)
         idx = np.concatenate([np.atleast_1d(cand), np.arange(self._kd_n, self.n)])
-        v = robot.log(self.nodes[idx], q[None])
-        j = int(np.argmin(np.einsum("ij,ij->i", v, v)))
-        return int(idx[j]), v[j]
+        j, v = robot.nearest(self.nodes[idx], q)
+        return int(idx[j]), v
 
     def branch(self, i: int) -> Array:
         """Configurations from the root to node ``i``."""

@@ -195,3 +195,71 @@ def check_motions_boxes(q0, tw, n, fallback, low, high, body, box_c, box_r, box_
         out[i, 0], out[i, 1], out[i, 2] = k, hit, c
         for j in range(nj):
             _integrate(q0[i], tw[i], min(j / n[i], 1.0), configs[i, j], ws[10])
+
+
+_GRID_SLACK = 1e-9
+
+
+@_jit
+def march_boxes(q0, q1, v, step, resolution, max_steps, low, high, body, boxes):  # type: ignore[no-untyped-def]
+    """``pointplan.planners.base.march`` of the geodesic ``q0 -> q1`` (twist ``v``) in
+    edges of length ``step`` (the last one shorter), each certified by
+    :func:`_check_motion` in ``intervals(length, resolution)`` sub-steps, up to
+    ``max_steps`` edges (``-1``: all), edge by edge until the first blocked one (the numpy
+    march checks them all at once and counts the same). Returns ``(nodes, reached,
+    checks)``: the ends of the free edges ``(n_free, 7)`` (the last one ``q1`` itself when
+    reached)."""
+    d = _norm(v)
+    if d <= 1e-12:
+        return np.empty((0, 7)), True, 0
+    total = max(1, math.ceil(d / step - _GRID_SLACK))
+    n = total if max_steps < 0 else min(total, max_steps)
+    if n <= 0:
+        return np.empty((0, 7)), False, 0
+    ends = np.empty(n + 1)
+    for e in range(n + 1):
+        ends[e] = min(e * (step / d), 1.0)
+    if n == total:
+        ends[n] = 1.0
+    ws = _scratch(body[0].shape[0], boxes[0].shape[0])
+    starts = np.empty((n + 1, 7))
+    for e in range(n + 1):
+        _integrate(q0, v, ends[e], starts[e], ws[10])
+    edge = np.empty(6)
+    last = np.empty(7)
+    checks, n_free = 0, n
+    for e in range(n):
+        frac = ends[e + 1] - ends[e]
+        m = max(1, math.ceil(frac * d / resolution - _GRID_SLACK))
+        for i in range(6):
+            edge[i] = v[i] * frac
+        k, _, c = _check_motion(starts[e], edge, m, e == 0, low, high, body, boxes, ws, last)
+        checks += c
+        if k < m:
+            n_free = e
+            break
+    nodes = starts[1 : n_free + 1].copy()
+    reached = n == total and n_free == n
+    if reached:
+        for i in range(7):
+            nodes[n_free - 1, i] = q1[i]
+    return nodes, reached, checks
+
+
+@_jit
+def nearest_pose(nodes, q):  # type: ignore[no-untyped-def]
+    """The row of ``nodes (n, 7)`` nearest to the pose ``q`` by ``|log(node^-1 q)|`` (the
+    first of equals) and the twist from it to ``q``."""
+    best, at = np.inf, -1
+    tw = np.empty(6)
+    out = np.empty(6)
+    for i in range(nodes.shape[0]):
+        _log(nodes[i], q, tw)
+        s = 0.0
+        for j in range(6):
+            s += tw[j] * tw[j]
+        if s < best:
+            best, at = s, i
+            for j in range(6):
+                out[j] = tw[j]
+    return at, out

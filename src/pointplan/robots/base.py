@@ -276,5 +276,28 @@ class Robot(ABC):
         :func:`pointplan.robots.motion.check_motions`."""
         return check_motions(self, world, q0, twist, n, low, high, fallback)
 
+    def march_compiled(
+        self,
+        world: CollisionWorld,
+        q0: Array,
+        q1: Array,
+        v: Array,
+        step: float,
+        resolution: float,
+        max_steps: int | None,
+        low: Array,
+        high: Array,
+    ) -> tuple[Array, bool, int] | None:
+        """``pointplan.planners.base.march`` in one compiled call, where a robot has one for
+        this world: ``(nodes, reached, checks)``; ``None`` (the default): march in numpy."""
+        return None
+
+    def nearest(self, nodes: Array, q: Array) -> tuple[int, Array]:
+        """The index of the row of ``nodes (n, config_dim)`` nearest to ``q`` (geodesic
+        distance; the first of equals) and the twist from it to ``q``."""
+        v = self.log(nodes, np.asarray(q, np.float64)[None])
+        i = int(np.argmin(np.einsum("ij,ij->i", v, v)))
+        return i, v[i]
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"

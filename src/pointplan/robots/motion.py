@@ -49,6 +49,17 @@ class Robot(Protocol):
 
     def log(self, q0: Array, q1: Array) -> Array: ...
 
+    def check_motions(
+        self,
+        world: CollisionWorld,
+        q0: Array,
+        twist: Array,
+        n: Int,
+        low: Array | None = None,
+        high: Array | None = None,
+        fallback: Bool | None = None,
+    ) -> MotionCheck: ...
+
 
 #: every checked body is grown by this much more: an accepted motion keeps at least this
 #: clearance (the evaluator calls a clearance below 1e-6 a contact)
@@ -181,5 +192,5 @@ def segments_free(
     a = np.asarray(a, np.float64)
     v = robot.log(a, np.asarray(b, np.float64))
     m = intervals(np.linalg.norm(v, axis=-1), resolution)
-    chk = check_motions(robot, world, a, v, m, low, high)
+    chk = robot.check_motions(world, a, v, m, low, high)  # the robot's own (compiled where it has one)
     return chk.free == m, chk.checks

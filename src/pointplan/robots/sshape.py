@@ -11,7 +11,7 @@ from ..geometry import lie
 from ..geometry._se3_kernels import pose_integrate_compiled, pose_log_compiled
 from ..geometry.collision import CollisionWorld
 from . import _body_kernels
-from .base import Array, Bool, BodyParts, Robot
+from .base import Array, BodyParts, Bool, Robot
 from .motion import MotionCheck
 
 #: centreline corners of the S-shape, body frame (from the paper's release)
@@ -150,13 +150,47 @@ class SShape(Robot):
             boxes = [b[None] for b in boxes]
         configs = np.empty((m, int(nf.max()) + 1 if m else 2, 7))
         out = np.empty((m, 3), np.int64)
-        _body_kernels.check_motions_boxes(qf, tf, nf, fb, lo, hi, self._body_arrays(), *boxes, stacked, configs, out)
+        bc, br, bh = boxes
+        _body_kernels.check_motions_boxes(
+            qf, tf, nf, fb, lo, hi, self._body_arrays(), bc, br, bh, stacked, configs, out
+        )
         return MotionCheck(
             free=out[:, 0].reshape(lead),
             collided=out[:, 1].astype(bool).reshape(lead),
             checks=out[:, 2].reshape(lead),
             configs=configs.reshape(lead + configs.shape[1:]),
         )
+
+    def march_compiled(
+        self,
+        world: CollisionWorld,
+        q0: Array,
+        q1: Array,
+        v: Array,
+        step: float,
+        resolution: float,
+        max_steps: int | None,
+        low: Array,
+        high: Array,
+    ) -> tuple[Array, bool, int] | None:
+        """``march`` in one compiled call where every obstacle of the (single-scene) world
+        is a box (:func:`pointplan.robots._body_kernels.march_boxes`: the same nodes,
+        answer and counts); ``None`` otherwise."""
+        if world.batch_shape != () or not world.boxes_only:
+            return None
+        f = np.ascontiguousarray
+        boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        nodes, reached, checks = _body_kernels.march_boxes(
+            f(q0, np.float64), f(q1, np.float64), f(v, np.float64), float(step), float(resolution),
+            -1 if max_steps is None else int(max_steps), f(low, np.float64), f(high, np.float64),
+            self._body_arrays(), boxes,
+        )  # fmt: skip
+        return nodes, bool(reached), int(checks)
+
+    def nearest(self, nodes: Array, q: Array) -> tuple[int, Array]:
+        """The node nearest to ``q`` and the twist from it (a compiled scan)."""
+        i, v = _body_kernels.nearest_pose(np.ascontiguousarray(nodes, np.float64), np.ascontiguousarray(q, np.float64))
+        return int(i), v
 
     def _body_arrays(self) -> tuple[Array, Array, Array]:
         """The body's box centres, half sides and corner map as the compiled kernels take

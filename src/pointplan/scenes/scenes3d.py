@@ -23,6 +23,7 @@ from ..robots import make_robot
 from ..robots.base import Robot
 from ..robots.sshape import BAR_THICKNESS
 from .base import Scenario
+from .cluttered import Cluttered3DScenario
 from .narrow2d import SPLIT_KEYS
 from .scene import DynamicScene, Scene
 
@@ -411,4 +412,5 @@ SCENARIOS_3D: dict[str, Callable[..., Scenario]] = {
     "slotfixed": SlotFixedScenario,
     "slotclassic": SlotClassicScenario,
     "qureshi3d": Qureshi3DScenario,
+    "cluttered3d": Cluttered3DScenario,
 }
