@@ -169,3 +169,66 @@ def test_compiled_rollout_hands_an_escape_over_to_the_numpy_one() -> None:
             same += 1
     assert handed >= 3, handed  # some rollouts escaped, so the hand-over was exercised
     assert same >= len(probs) - 1, same  # float32 round-off may part a rare rollout
+
+
+@pytest.mark.parametrize("env", ["narrow2d", "boxes3d"])
+def test_ball_motion_checks_and_march_are_the_numpy_ones(env: str) -> None:
+    """The balls' compiled check_motions (one scene; stacked scenes, one motion each) and
+    march against the numpy ones on the same robot: the same answers, counts, samples and
+    nodes; Bi-RRT plans the same paths either way."""
+    from pointplan.geometry.collision import CollisionWorld
+    from pointplan.planners.base import march
+    from pointplan.planners.birrt import BiRRT
+    from pointplan.robots.base import Robot
+    from pointplan.scenes.scenarios import make_scenario
+
+    sc = make_scenario(env)
+    robot = sc.robot
+
+    class Plain(type(robot)):  # type: ignore[misc]
+        def check_motions(self, *a: object, **k: object):  # type: ignore[no-untyped-def]
+            return Robot.check_motions(self, *a, **k)  # type: ignore[arg-type]
+
+        def march_compiled(self, *a: object) -> None:
+            return None
+
+    plain = Plain()
+    problems = sc.problems("test", 6, seed=3)
+    rng = np.random.default_rng(5)
+    d = robot.dim
+    kinds = set()
+    for p in problems:
+        world, low, high = p.scene.world, p.scene.low, p.scene.high
+        assert world.boxes_only
+        q0 = rng.uniform(low - 0.02, high + 0.02, size=(50, d))
+        tw = rng.normal(size=(50, d)) * rng.choice([0.005, 0.05, 0.3], size=(50, 1))
+        n = intervals(np.linalg.norm(tw, axis=-1), 0.01)
+        fb = rng.random(50) < 0.7
+        for args in ((), (low, high), (low, high, fb)):
+            a, b = robot.check_motions(world, q0, tw, n, *args), plain.check_motions(world, q0, tw, n, *args)
+            assert np.array_equal(a.free, b.free) and np.array_equal(a.collided, b.collided)
+            assert np.array_equal(a.checks, b.checks) and np.array_equal(a.configs, b.configs)
+            kinds |= set(zip((a.free == n).tolist(), a.collided.tolist()))
+        for i in range(20):
+            step = float(rng.choice([0.07, 0.3, 1e12]))
+            budget = None if i % 3 else int(rng.integers(1, 4))
+            ma, mb = (
+                march(robot, p, q0[i], q0[i + 1], step, 0.01, budget),
+                march(plain, p, q0[i], q0[i + 1], step, 0.01, budget),
+            )
+            assert np.array_equal(ma.nodes, mb.nodes) and (ma.reached, ma.checks) == (mb.reached, mb.checks)
+    assert len(kinds) >= 3
+    stacked = CollisionWorld.stack([p.scene.world for p in problems])
+    q0 = np.stack([rng.uniform(p.scene.low, p.scene.high) for p in problems])
+    tw = rng.normal(size=q0.shape) * 0.1
+    lows, highs = np.stack([p.scene.low for p in problems]), np.stack([p.scene.high for p in problems])
+    a = robot.check_motions(stacked, q0, tw, np.full(len(problems), 10), lows, highs)
+    b = plain.check_motions(stacked, q0, tw, np.full(len(problems), 10), lows, highs)
+    assert (
+        np.array_equal(a.free, b.free) and np.array_equal(a.checks, b.checks) and np.array_equal(a.configs, b.configs)
+    )
+    for p in problems[:3]:
+        ra, rb = BiRRT(robot, max_nodes=2000).plan(p), BiRRT(plain, max_nodes=2000).plan(p)
+        assert (
+            ra.success == rb.success and np.array_equal(ra.path, rb.path) and ra.collision_checks == rb.collision_checks
+        )

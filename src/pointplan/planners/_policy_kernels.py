@@ -26,12 +26,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-#: as in pointplan.robots.motion (imported there; repeated as literals for the compiler)
-_CONTACT_MARGIN = 1e-5
+from ..robots._ball_kernels import _hits_boxes, _motion
+
+#: as in pointplan.robots.motion (repeated as a literal for the compiler)
+_GRID_SLACK = 1e-9
 #: as in pointplan.models.actor_critic
 _LOG_STD_MIN, _LOG_STD_MAX = -20.0, 2.0
-_BOUNDS_EPS = 1e-12
-_GRID_SLACK = 1e-9
 
 #: rollout ends (``rollout_ball``'s code); ``END_ESCAPE``: the robot is stuck by the
 #: escape's test (``I_ESC_WINDOW`` > 0), and the rollout is handed back to Python there
@@ -42,25 +42,6 @@ _jit_fast = numba.njit(cache=True, nogil=True, fastmath=True)
 
 
 # ------------------------------------------------------------------ collision tests
-@_jit
-def _hits_boxes(p, r2, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
-    """``any(sphere_box_sqdist(p, boxes) <= r2)``, written as collision.py computes it."""
-    d = p.shape[0]
-    for k in range(box_c.shape[0]):
-        out = 0.0
-        for i in range(d):
-            local = (p[0] - box_c[k, 0]) * box_r[k, 0, i]
-            for j in range(1, d):
-                local = local + (p[j] - box_c[k, j]) * box_r[k, j, i]
-            ex = abs(local) - box_h[k, i]
-            if ex < 0.0:
-                ex = 0.0
-            out += ex * ex
-        if out <= r2:
-            return True
-    return False
-
-
 @_jit
 def _segment_hits(a, b, radius, spacing, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
     d = a.shape[0]
@@ -100,52 +81,6 @@ def ball_segment_hits_boxes_count(
     first hit)."""
     hit, n = _segment_hits(a, b, float(radius), float(spacing), box_c, box_r, box_h)
     return bool(hit), int(n)
-
-
-@_jit
-def _motion(q0, tw, n, radius, low, high, box_c, box_r, box_h, fallback, end):  # type: ignore[no-untyped-def]
-    """check_motions for one motion ``q0 + s tw`` in ``n`` sub-steps: returns ``(free,
-    collided, checks)`` and writes the last free sample (``q0`` when ``free <= 0``) to
-    ``end``."""
-    d = q0.shape[0]
-    seg2 = 0.0
-    for i in range(d):
-        si = tw[i] / n
-        seg2 += si * si
-    rg = np.sqrt(radius * radius + (0.5 * 0.5) * seg2) + _CONTACT_MARGIN
-    r2g = rg * rg
-    checks = n + 1
-    cfg = np.empty(d)
-    for i in range(d):
-        end[i] = q0[i]
-    for j in range(n + 1):
-        s = min(j / n, 1.0)
-        for i in range(d):
-            cfg[i] = q0[i] + tw[i] * s
-        bad = _hits_boxes(cfg, r2g, box_c, box_r, box_h)
-        if j == 0 and bad and fallback:
-            r0 = np.sqrt(radius * radius + (0.0 * 0.0) * seg2) + _CONTACT_MARGIN
-            r1 = np.sqrt(radius * radius + (1.0 * 1.0) * seg2) + _CONTACT_MARGIN
-            cfg1 = np.empty(d)
-            s1 = min(1 / n, 1.0)
-            for i in range(d):
-                cfg1[i] = q0[i] + tw[i] * s1
-            if not _hits_boxes(cfg, r0 * r0, box_c, box_r, box_h) and not _hits_boxes(
-                cfg1, r1 * r1, box_c, box_r, box_h
-            ):
-                bad = False
-            checks += 2
-        out = False
-        for i in range(d):
-            mid = (high[i] + low[i]) / 2
-            half = (high[i] - low[i]) / 2 + _BOUNDS_EPS
-            if abs(cfg[i] - mid) > half:
-                out = True
-        if bad or out:
-            return j - 1, bad, checks
-        for i in range(d):
-            end[i] = cfg[i]
-    return n, False, checks
 
 
 def ball_motion(

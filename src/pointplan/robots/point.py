@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
-from .base import Array, BodyParts, Robot
+import numpy as np
+from numpy.typing import NDArray
+
+from ..geometry.collision import CollisionWorld
+from . import _ball_kernels
+from .base import Array, BodyParts, Bool, Robot
+from .motion import MotionCheck
 
 
 class _Ball(Robot):
@@ -64,6 +70,71 @@ class _Ball(Robot):
             r = r if np.ndim(r) == 0 else np.broadcast_to(r, q.shape[:-1]).reshape(-1)
             return world.spheres_collide(q.reshape(-1, self.dim), r).reshape(q.shape[:-1])
         return world.spheres_collide(q, r)
+
+    def check_motions(
+        self,
+        world: CollisionWorld,
+        q0: Array,
+        twist: Array,
+        n: NDArray[np.int64],
+        low: Array | None = None,
+        high: Array | None = None,
+        fallback: Bool | None = None,
+    ) -> MotionCheck:
+        """:meth:`Robot.check_motions`, compiled where every obstacle is a box
+        (:func:`pointplan.robots._ball_kernels.check_motions_balls`: the same answers,
+        counts and samples); otherwise the numpy check."""
+        q0 = np.asarray(q0, np.float64)
+        lead = q0.shape[:-1]
+        stacked = world.batch_shape != ()
+        if not world.boxes_only or (stacked and lead != world.batch_shape):
+            return super().check_motions(world, q0, twist, n, low, high, fallback)
+        d, f = self.dim, np.ascontiguousarray
+        m = math.prod(lead)
+        qf = f(q0.reshape(m, d))
+        tf = f(np.broadcast_to(np.asarray(twist, np.float64), lead + (d,)).reshape(m, d))
+        nf = f(np.maximum(np.broadcast_to(np.asarray(n, np.int64), lead), 1).reshape(m))
+        fb = np.ones(m, bool) if fallback is None else f(np.broadcast_to(fallback, lead).reshape(m))
+        if low is None or high is None:  # bounds that stop nothing
+            low, high = np.full(d, -1e300), np.full(d, 1e300)
+        lo = f(np.broadcast_to(np.asarray(low, np.float64), lead + (d,)).reshape(m, d))
+        hi = f(np.broadcast_to(np.asarray(high, np.float64), lead + (d,)).reshape(m, d))
+        bc, br, bh = (f(a, np.float64) for a in (world.box_c, world.box_r, world.box_h))
+        if not stacked:
+            bc, br, bh = bc[None], br[None], bh[None]
+        configs = np.empty((m, int(nf.max()) + 1 if m else 2, d))
+        out = np.empty((m, 3), np.int64)
+        _ball_kernels.check_motions_balls(qf, tf, nf, fb, lo, hi, self.radius, bc, br, bh, stacked, configs, out)
+        return MotionCheck(
+            free=out[:, 0].reshape(lead),
+            collided=out[:, 1].astype(bool).reshape(lead),
+            checks=out[:, 2].reshape(lead),
+            configs=configs.reshape(lead + configs.shape[1:]),
+        )
+
+    def march_compiled(
+        self,
+        world: CollisionWorld,
+        q0: Array,
+        q1: Array,
+        v: Array,
+        step: float,
+        resolution: float,
+        max_steps: int | None,
+        low: Array,
+        high: Array,
+    ) -> tuple[Array, bool, int] | None:
+        """``march`` in one compiled call where every obstacle of the (single-scene) world
+        is a box (:func:`pointplan.robots._ball_kernels.march_balls`); ``None`` otherwise."""
+        if world.batch_shape != () or not world.boxes_only:
+            return None
+        f = np.ascontiguousarray
+        nodes, reached, checks = _ball_kernels.march_balls(
+            f(q0, np.float64), f(q1, np.float64), f(v, np.float64), float(step), float(resolution),
+            -1 if max_steps is None else int(max_steps), f(low, np.float64), f(high, np.float64), self.radius,
+            f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64),
+        )  # fmt: skip
+        return nodes, bool(reached), int(checks)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(radius={self.radius})"
