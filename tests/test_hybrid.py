@@ -70,3 +70,24 @@ def test_hybrid_with_ompl_fallback_and_a_time_budget() -> None:
         assert res.info.get("fallback") in (None, "ompl:RRTConnect")
         assert planner.fallback.time_limit <= 3.0
     assert solved == 4
+
+
+def test_the_hybrid_is_bounded_by_time_not_nodes() -> None:
+    """The hybrid's limit is a time budget for the whole query (10 s by default), its
+    Bi-RRT without a node budget; Bi-RRT needs one of the two and stops at its time limit."""
+    import time
+
+    from pointplan.planners import make_planner
+    from pointplan.planners.birrt import BiRRT
+    from pointplan.robots.sshape import SShape
+    from pointplan.scenes.scenarios import make_scenario
+
+    hyb = make_planner("hybrid", SShape(), observation="local")
+    assert hyb.time_limit == 10.0 and hyb.fallback.max_nodes is None  # type: ignore[attr-defined]
+    with pytest.raises(ValueError, match="node budget"):
+        BiRRT(SShape(), max_nodes=None)
+    p = make_scenario("slot", robot="sshape").problems("test", 1, seed=0)[0]  # hard for a plain Bi-RRT
+    t = time.perf_counter()
+    res = BiRRT(SShape(), max_nodes=None, time_limit=0.3).plan(p)
+    assert time.perf_counter() - t < 2.0
+    assert res.success or res.nodes > 2

@@ -173,9 +173,9 @@ def test_compiled_rollout_hands_an_escape_over_to_the_numpy_one() -> None:
 
 @pytest.mark.parametrize("env", ["narrow2d", "boxes3d"])
 def test_ball_motion_checks_and_march_are_the_numpy_ones(env: str) -> None:
-    """The balls' compiled check_motions (one scene; stacked scenes, one motion each) and
-    march against the numpy ones on the same robot: the same answers, counts, samples and
-    nodes; Bi-RRT plans the same paths either way."""
+    """The balls' compiled check_motions (one scene; stacked scenes, one motion each),
+    march and shortcuts against the numpy and Python ones on the same robot: the same
+    answers, counts, samples and nodes; Bi-RRT plans the same paths either way."""
     from pointplan.geometry.collision import CollisionWorld
     from pointplan.planners.base import march
     from pointplan.planners.birrt import BiRRT
@@ -190,6 +190,9 @@ def test_ball_motion_checks_and_march_are_the_numpy_ones(env: str) -> None:
             return Robot.check_motions(self, *a, **k)  # type: ignore[arg-type]
 
         def march_compiled(self, *a: object) -> None:
+            return None
+
+        def shortcut_compiled(self, *a: object) -> None:
             return None
 
     plain = Plain()
@@ -227,8 +230,11 @@ def test_ball_motion_checks_and_march_are_the_numpy_ones(env: str) -> None:
     assert (
         np.array_equal(a.free, b.free) and np.array_equal(a.checks, b.checks) and np.array_equal(a.configs, b.configs)
     )
+    shortened = 0
     for p in problems[:3]:
         ra, rb = BiRRT(robot, max_nodes=2000).plan(p), BiRRT(plain, max_nodes=2000).plan(p)
         assert (
             ra.success == rb.success and np.array_equal(ra.path, rb.path) and ra.collision_checks == rb.collision_checks
         )
+        shortened += ra.success and len(ra.path) < len(ra.raw_path)
+    assert shortened > 0

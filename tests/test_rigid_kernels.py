@@ -259,6 +259,9 @@ class _PlainSShape(SShape):
     def march_compiled(self, *args: object) -> None:
         return None
 
+    def shortcut_compiled(self, *args: object) -> None:
+        return None
+
     def nearest(self, nodes: np.ndarray, q: np.ndarray) -> tuple[int, np.ndarray]:
         from pointplan.robots.base import Robot
 
@@ -266,9 +269,9 @@ class _PlainSShape(SShape):
 
 
 def test_compiled_march_and_nearest_are_the_numpy_ones(problems: list[Problem]) -> None:
-    """march (Bi-RRT's extend and connect, the edges of every planner) and the nearest
-    node, compiled for the S-shape among boxes, against numpy: the same nodes, answers
-    and counts; and Bi-RRT plans the same paths either way."""
+    """march (Bi-RRT's extend and connect, the edges of every planner), the nearest node
+    and the shortcuts, compiled for the S-shape among boxes, against numpy and Python:
+    the same nodes, answers and counts; and Bi-RRT plans the same paths either way."""
     from pointplan.planners.base import march
     from pointplan.planners.birrt import BiRRT
 
@@ -288,6 +291,9 @@ def test_compiled_march_and_nearest_are_the_numpy_ones(problems: list[Problem]) 
         j, w = plain.nearest(qs, qs[0] * 0.9 + 0.1)
         assert i == j and np.allclose(v, w, rtol=0, atol=1e-15)
     assert len(kinds) >= 3
+    shortened = 0
     for p in problems[:3]:
         a, b = BiRRT(fast, max_nodes=2000).plan(p), BiRRT(plain, max_nodes=2000).plan(p)
         assert a.success == b.success and np.array_equal(a.path, b.path) and a.collision_checks == b.collision_checks
+        shortened += a.success and len(a.path) < len(a.raw_path)
+    assert shortened > 0

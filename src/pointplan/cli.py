@@ -62,6 +62,21 @@ def positive_int(text: str) -> int:
     return _int_at_least(text, 1, "at least 1")
 
 
+def positive_float(text: str) -> float:
+    """An argparse type: a finite number above 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not (np.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a number above 0, got {text}")
+    return value
+
+
+#: Bi-RRT's node budget on the command line when --max-nodes is not given
+DEFAULT_MAX_NODES = 20000
+
+
 def non_negative_int(text: str) -> int:
     """An argparse type: an integer of at least 0."""
     return _int_at_least(text, 0, "0 or more")
@@ -291,10 +306,13 @@ def _planner(name: str, robot: Robot, args: argparse.Namespace, seed: int) -> Pl
     from .planners import make_planner
 
     kwargs: dict[str, Any] = {}
+    given_nodes = getattr(args, "max_nodes", None)
+    nodes = given_nodes or DEFAULT_MAX_NODES
+    time_limit = getattr(args, "time_limit", None)
     if name == "birrt":
-        kwargs = {"max_nodes": args.max_nodes, "seed": seed}
+        kwargs = {"max_nodes": nodes, "seed": seed, "time_limit": time_limit}
     elif name.lower() in LSAMPLE_PLANNERS:
-        kwargs = {"max_nodes": args.max_nodes, "seed": seed, "checkpoint": getattr(args, "checkpoint", None)}
+        kwargs = {"max_nodes": nodes, "seed": seed, "checkpoint": getattr(args, "checkpoint", None)}
     elif name in POLICY_PLANNERS:
         kwargs = {
             "checkpoint": getattr(args, "checkpoint", None),
@@ -308,13 +326,15 @@ def _planner(name: str, robot: Robot, args: argparse.Namespace, seed: int) -> Pl
         if getattr(args, "escape", None) is not None:
             kwargs["escape"] = args.escape
         if name == "hybrid":
-            kwargs.update(max_nodes=args.max_nodes, seed=seed)
+            kwargs.update(max_nodes=given_nodes, seed=seed)
+        if name in ("hybrid", "hybrid-ompl") and time_limit is not None:
+            kwargs["time_limit"] = time_limit
     elif name in MPNET_PLANNERS:
         kwargs = {"checkpoint": getattr(args, "checkpoint", None), "seed": seed}
         if name == "mpnet-hr":
-            kwargs["max_nodes"] = args.max_nodes
+            kwargs["max_nodes"] = nodes
     elif name.lower().startswith("ompl:"):
-        kwargs = {"time_limit": getattr(args, "time_limit", None) or 1.0}
+        kwargs = {"time_limit": time_limit or 1.0}
         if getattr(args, "range", None):
             kwargs["range"] = args.range
     try:
@@ -357,10 +377,13 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument(
         "--max-nodes",
         type=positive_int,
-        default=20000,
-        help="Bi-RRT node budget (hybrid and mpnet-hr: per Bi-RRT call; also the lsample planners') (default: %(default)s)",
+        help=f"Bi-RRT node budget (mpnet-hr: per Bi-RRT call; also the lsample planners') (default: {DEFAULT_MAX_NODES:,}; hybrid: none, its --time-limit bounds it)",
     )
-    p.add_argument("--time-limit", type=float, help="seconds per problem for ompl:NAME planners (default: 1)")
+    p.add_argument(
+        "--time-limit",
+        type=positive_float,
+        help="seconds per query: ompl:NAME (default: 1), hybrid and hybrid-ompl (default: 10, the whole query), birrt (default: none, --max-nodes bounds it)",
+    )
     p.add_argument(
         "--range", type=float, help="longest edge of ompl:NAME planners that have one (default: 0.07, Bi-RRT's step)"
     )
@@ -793,7 +816,7 @@ def _demo_planners(args: argparse.Namespace, scenario: Scenario) -> dict[str, Pl
     _say_shipped("policy", policy, args)
     return {
         "policy": policy,
-        "birrt": make_planner("birrt", robot, seed=0, max_nodes=args.max_nodes),
+        "birrt": make_planner("birrt", robot, seed=0, max_nodes=args.max_nodes or DEFAULT_MAX_NODES),
         "straight": make_planner("straight", robot),
     }
 

@@ -49,7 +49,7 @@ def _hybrid_factory(
     checkpoint: str | None = None,
     observation: str | None = None,
     scene: str | None = None,
-    max_nodes: int = 10000,
+    max_nodes: int | None = None,
     seed: int = 0,
     stall_steps: int | None = 10,
     stall_distance: float = 0.035,
@@ -57,7 +57,7 @@ def _hybrid_factory(
     action_noise: float = 1.0,
     escape: Escape | int | None = None,
     fallback: str = "birrt",
-    time_limit: float | None = None,
+    time_limit: float | None = 10.0,
     **kw: Any,
 ) -> Planner:
     """The policy (``checkpoint`` or the shipped one, for ``scene`` if one ships), stopped when it stalls (moved less
@@ -65,7 +65,8 @@ def _hybrid_factory(
     ``fallback`` from its configuration closest to the goal: ``birrt`` (``max_nodes``,
     ``seed``, other keywords) or ``ompl:NAME`` (OMPL's planner with pointplan's certified
     motion checks; other keywords go to :class:`~pointplan.planners.ompl.OMPLPlanner`).
-    ``time_limit``: seconds for the whole query. ``attempts``, ``action_noise``,
+    ``time_limit``: seconds for the whole query (10 by default; the Bi-RRT fallback then
+    has no node budget unless ``max_nodes`` is given; ``None``: Bi-RRT's 10,000 nodes). ``attempts``, ``action_noise``,
     ``escape``: the policy's sampled retries and stall escapes (:class:`PolicyPlanner`)."""
     from .hybrid import HybridPlanner
 
@@ -81,6 +82,8 @@ def _hybrid_factory(
         escape=escape,
     )
     if fallback.lower() == "birrt":
+        if max_nodes is None and time_limit is None:
+            max_nodes = 10000
         back: Any = BiRRT(robot, max_nodes=max_nodes, seed=seed, time_limit=time_limit, **kw)
     elif fallback.lower().startswith("ompl:"):
         from .ompl import make_ompl_planner

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -120,11 +121,25 @@ class _Tree:
         return self.nodes[: self.n].copy(), self.parent[: self.n].copy()
 
 
+class _Replay:
+    """Uniform draws taken ahead (``uniform(low, high, 2)`` from them as a generator gives
+    it), so that the Python shortcut loop and the compiled one read the same numbers."""
+
+    def __init__(self, u: Array) -> None:
+        self.u, self.k = u, 0
+
+    def uniform(self, low: float, high: float, size: int) -> Array:
+        out = low + (high - low) * self.u[self.k : self.k + size]
+        self.k += size
+        return out
+
+
 class BiRRT:
     """RRT-Connect with shortcutting.
 
     ``max_nodes`` bounds the nodes of both trees together (the roots included); reaching it
-    is a failure. ``goal_bias`` is the probability of steering the extending tree toward
+    is a failure. ``time_limit`` bounds a query's search in seconds; ``max_nodes=None``
+    leaves the time limit as the only bound (one of the two is required). ``goal_bias`` is the probability of steering the extending tree toward
     the other tree's root instead of a uniform sample (0 is plain RRT-Connect). Each
     ``plan`` call draws from ``default_rng((seed, call number))``: a fresh planner gives
     the same results on the same sequence of problems.
@@ -139,7 +154,7 @@ class BiRRT:
     def __init__(
         self,
         robot: Robot,
-        max_nodes: int = 10000,
+        max_nodes: int | None = 10000,
         step: float = 0.07,
         resolution: float = 0.01,
         shortcut_iters: int = 100,
@@ -154,8 +169,12 @@ class BiRRT:
             raise ValueError(f"time_limit must be positive seconds or None, not {time_limit}")
         if not 0.0 <= goal_bias <= 1.0:
             raise ValueError("goal_bias is a probability")
+        if max_nodes is None and time_limit is None:
+            raise ValueError("Bi-RRT needs a node budget (max_nodes) or a time limit (time_limit)")
+        if max_nodes is not None and int(max_nodes) < 2:
+            raise ValueError(f"max_nodes must be at least 2 (the two roots), not {max_nodes}")
         self.robot = robot
-        self.max_nodes = int(max_nodes)
+        self.max_nodes = None if max_nodes is None else int(max_nodes)
         self.step = float(step)
         self.resolution = float(resolution)
         self.shortcut_iters = int(shortcut_iters)
@@ -201,7 +220,8 @@ class BiRRT:
         a = 0  # index of the tree that extends this iteration
         raw: Array | None = None
         deadline = t0 + self.time_limit if self.time_limit is not None else np.inf
-        while trees[0].n + trees[1].n < self.max_nodes and time.perf_counter() < deadline:
+        cap = self.max_nodes if self.max_nodes is not None else np.inf
+        while trees[0].n + trees[1].n < cap and time.perf_counter() < deadline:
             if k == len(samples):
                 samples = (
                     robot.sample_uniform(rng, _SAMPLE_BLOCK, low, high) if draw is None else draw(rng, _SAMPLE_BLOCK)
@@ -219,7 +239,7 @@ class BiRRT:
                 new = ta.add(ext.nodes, near)
                 q_new = ta.nodes[new]
                 # CONNECT tb toward the new node, as far as it goes
-                budget = self.max_nodes - trees[0].n - trees[1].n
+                budget = None if self.max_nodes is None else self.max_nodes - trees[0].n - trees[1].n
                 near_b, v = tb.nearest(robot, q_new)
                 con = march(robot, world, tb.nodes[near_b], q_new, self.step, self.resolution, budget, low, high, v)
                 checks += con.checks
@@ -247,7 +267,7 @@ class BiRRT:
         )
 
     # ------------------------------------------------------------------ smoothing
-    def shortcut(self, path: Array, problem: Problem, rng: np.random.Generator) -> tuple[Array, int]:
+    def shortcut(self, path: Array, problem: Problem, rng: Any) -> tuple[Array, int]:
         """``shortcut_iters`` random shortcuts between points anywhere on the path (by arc
         length). A shortcut replaces a stretch when it is shorter and its geodesic, together
         with the two partial segments that lead to it, is free and inside the bounds.
@@ -256,6 +276,13 @@ class BiRRT:
         path = np.asarray(path, np.float64)
         checks = 0
         twists = robot.log(path[:-1], path[1:])  # segment e is path[e] exp(s twists[e])
+        if len(path) >= 3 and self.shortcut_iters > 0:
+            # the same draws as the loop below (rng.uniform(0, L, 2) is L times two of these)
+            u = rng.random(2 * self.shortcut_iters)
+            fast = robot.shortcut_compiled(scene.world, path, twists, u, self.resolution, scene.low, scene.high)
+            if fast is not None:
+                return fast
+            rng = _Replay(u)
         for _ in range(self.shortcut_iters):
             if len(path) < 3:
                 break

@@ -292,6 +292,21 @@ class Robot(ABC):
         this world: ``(nodes, reached, checks)``; ``None`` (the default): march in numpy."""
         return None
 
+    def shortcut_compiled(
+        self,
+        world: CollisionWorld,
+        path: Array,
+        twists: Array,
+        u: Array,
+        resolution: float,
+        low: Array,
+        high: Array,
+    ) -> tuple[Array, int] | None:
+        """Bi-RRT's shortcutting in one compiled call, where a robot has one for this world
+        (``u``: two uniform numbers per iteration): ``(path, checks)``; ``None`` (the
+        default): shortcut in Python."""
+        return None
+
     def nearest(self, nodes: Array, q: Array) -> tuple[int, Array]:
         """The index of the row of ``nodes (n, config_dim)`` nearest to ``q`` (geodesic
         distance; the first of equals) and the twist from it to ``q``."""

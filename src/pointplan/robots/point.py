@@ -9,8 +9,12 @@ from numpy.typing import NDArray
 
 from ..geometry.collision import CollisionWorld
 from . import _ball_kernels
+from ._shortcut_kernels import shortcut_path
 from .base import Array, BodyParts, Bool, Robot
 from .motion import MotionCheck
+
+#: the body arrays the compiled shortcut takes for a robot without box parts (unused)
+_NO_BODY = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((6, 0)))
 
 
 class _Ball(Robot):
@@ -111,6 +115,29 @@ class _Ball(Robot):
             checks=out[:, 2].reshape(lead),
             configs=configs.reshape(lead + configs.shape[1:]),
         )
+
+    def shortcut_compiled(
+        self,
+        world: CollisionWorld,
+        path: Array,
+        twists: Array,
+        u: Array,
+        resolution: float,
+        low: Array,
+        high: Array,
+    ) -> tuple[Array, int] | None:
+        """Bi-RRT's shortcutting in one compiled call where every obstacle of the
+        (single-scene) world is a box (:func:`pointplan.robots._shortcut_kernels.shortcut_path`:
+        the same path and counts as the Python loop); ``None`` otherwise."""
+        if world.batch_shape != () or not world.boxes_only:
+            return None
+        f = np.ascontiguousarray
+        boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        out, checks = shortcut_path(
+            0, f(path, np.float64), f(twists, np.float64), f(u, np.float64), float(resolution),
+            f(low, np.float64), f(high, np.float64), self.radius, _NO_BODY, boxes,
+        )  # fmt: skip
+        return out, int(checks)
 
     def march_compiled(
         self,

@@ -11,6 +11,7 @@ from ..geometry import lie
 from ..geometry._se3_kernels import pose_integrate_compiled, pose_log_compiled
 from ..geometry.collision import CollisionWorld
 from . import _body_kernels
+from ._shortcut_kernels import shortcut_path
 from .base import Array, BodyParts, Bool, Robot
 from .motion import MotionCheck
 
@@ -160,6 +161,29 @@ class SShape(Robot):
             checks=out[:, 2].reshape(lead),
             configs=configs.reshape(lead + configs.shape[1:]),
         )
+
+    def shortcut_compiled(
+        self,
+        world: CollisionWorld,
+        path: Array,
+        twists: Array,
+        u: Array,
+        resolution: float,
+        low: Array,
+        high: Array,
+    ) -> tuple[Array, int] | None:
+        """Bi-RRT's shortcutting in one compiled call where every obstacle of the
+        (single-scene) world is a box (:func:`pointplan.robots._shortcut_kernels.shortcut_path`:
+        the same path and counts as the Python loop); ``None`` otherwise."""
+        if world.batch_shape != () or not world.boxes_only:
+            return None
+        f = np.ascontiguousarray
+        boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        out, checks = shortcut_path(
+            1, f(path, np.float64), f(twists, np.float64), f(u, np.float64), float(resolution),
+            f(low, np.float64), f(high, np.float64), 0.0, self._body_arrays(), boxes,
+        )  # fmt: skip
+        return out, int(checks)
 
     def march_compiled(
         self,
