@@ -1,7 +1,9 @@
-"""Many queries at once: ``plan_many`` (the rollout engine's lockstep stepper, one batched
-network call and one batched motion check per step for all problems) against
-``plan`` in a loop and against OMPL's RRTConnect in a loop, planners taking turns in
-blocks of problems; queries per second of wall time, one thread. Every returned path is
+"""Many queries at once: ``plan_many`` (one by one through the compiled or one-robot
+rollout where the observer has one, else the rollout engine's lockstep stepper: one
+batched network call and one batched motion check per step for all problems) against
+``plan`` in a loop, the hybrid in a loop (the policy, then Bi-RRT where it fails) and
+OMPL's RRTConnect in a loop, planners taking turns in blocks of problems; queries per
+second of wall time, one thread. Every returned path is
 re-checked by the evaluator and only accepted ones count as solved.
 
     python benchmarks/bench_plan_many.py --env boxes3d --robot sphere3d --problems 400 --block 100
@@ -36,9 +38,11 @@ def main() -> None:
     for p in problems:  # the collision worlds, built once for all
         _ = p.scene.world
     policy = make_planner("policy", robot, observation=args.observation)
+    hybrid = make_planner("hybrid", robot, observation=args.observation)
     runs = {
         "policy.plan_many": lambda ps: policy.plan_many(ps),
         "policy.plan (loop)": lambda ps: [policy.plan(p) for p in ps],
+        "hybrid (loop)": lambda ps: [hybrid.plan(p) for p in ps],
     }
     try:
         ompl = make_planner("ompl:RRTConnect", robot, time_limit=10.0)

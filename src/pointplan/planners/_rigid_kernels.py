@@ -26,7 +26,17 @@ import numba
 import numpy as np
 
 from ..geometry._kernels import _ray_box_row
-from ..robots._body_kernels import _body_hits, _check_motion, _distance, _integrate, _log, _norm, _rotation, _scratch
+from ..robots._body_kernels import (
+    _body_hits,
+    _check_motion,
+    _distance,
+    _integrate,
+    _log,
+    _norm,
+    _rotation,
+    _scratch,
+    motion_free,
+)
 from ._policy_kernels import (
     END_GREEDY,
     END_HORIZON,
@@ -104,8 +114,7 @@ def _edge_free(a, b, resolution, low, high, body, boxes, ws):  # type: ignore[no
     start = poses[3]
     _integrate(a, v, 0.0, start, ws[10])
     m = max(1, math.ceil(d / resolution - _GRID_SLACK))
-    k, _, checks = _check_motion(start, v, m, True, low, high, body, boxes, ws, poses[2])
-    return k == m, checks
+    return motion_free(start, v, m, True, low, high, body, boxes, ws)
 
 
 # ------------------------------------------------------------------ the observation
