@@ -19,9 +19,10 @@ from pointplan.geometry.collision import (
 from pointplan.geometry.shapes import Box, Capsule, Cone, Cylinder, Mesh, Sphere
 from pointplan.planners import make_planner
 from pointplan.robots import make_robot
+from pointplan.scenes.registry import SCENARIOS_3D
 from pointplan.scenes.scenarios import make_scenario
 from pointplan.scenes.scene import DynamicScene
-from pointplan.scenes.scenes3d import SCENARIOS_3D, SlotConfig, SlotScenario
+from pointplan.scenes.scenes3d import SlotConfig, SlotScenario
 
 #: 3D-YCB loads and decimates meshes: its cases are slow
 SCENES = [pytest.param(s, marks=pytest.mark.slow) if s == "ycb3d" else s for s in SCENARIOS_3D]

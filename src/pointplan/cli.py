@@ -354,7 +354,7 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument(
         "--env",
         default="narrow2d",
-        help="scenario: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d (default: narrow2d)",
+        help="scenario: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d, cluttered3d (default: narrow2d)",
     )
     p.add_argument("--scene", help="plan on a scene file (JSON, see docs/scenes.md) instead of --env")
     p.add_argument(
@@ -1497,7 +1497,7 @@ def _add_net(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--env",
         default="narrow2d",
-        help="scenario to train on: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d (default: %(default)s)",
+        help="scenario to train on: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d, cluttered3d (default: %(default)s)",
     )
     p.add_argument("--robot", help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot)")
     p.add_argument(

@@ -19,9 +19,9 @@ is drawn from the workspace's own random stream:
     window in one wall, sometimes boxes inside.
 
 Problems: one end (start or goal, drawn at random) lies inside the furniture (a shelf
-compartment, the cage, under the table, inside the container), the other outside it (or,
-for shelves, in another compartment), both free for the robot and at least
-``min_goal_distance`` apart. The sampler prefers pairs whose straight line is blocked: it
+compartment, the cage, under the table, inside the container: the robot's position and
+the centres of all its body parts), the other outside it (or, for shelves, in another
+compartment), both free for the robot and at least ``min_goal_distance`` apart. The sampler prefers pairs whose straight line is blocked: it
 draws up to ``problem_tries`` pairs and keeps the first blocked one (else the first pair).
 Nothing guarantees that a problem is solvable beyond its ends being free.
 
@@ -34,8 +34,6 @@ S-shape (``sshape``) works too.
 from __future__ import annotations
 
 import math
-import zlib
-from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -43,18 +41,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geometry.shapes import Box
-from ..robots import make_robot
 from ..robots.base import Robot
-from .base import Scenario
-from .narrow2d import SPLIT_KEYS
 from .scene import Scene
+from .scenes3d import HALF_EXTENT, HIGH, LOW, Scenario3D
 
 Array = NDArray[np.float64]
 Bool = NDArray[np.bool_]
 
-HALF_EXTENT = 0.6
-LOW = np.full(3, -HALF_EXTENT)
-HIGH = np.full(3, HALF_EXTENT)
 #: the layout kinds, in the order the builders are looked up
 KINDS = ("shelves", "cage", "table", "openbox")
 
@@ -93,13 +86,13 @@ class Frame:
     origin: Array
     rotation: Array
 
-    def box(self, low: Sequence[float], high: Sequence[float], yaw: float = 0.0) -> Box:
+    def box(self, low: Sequence[float] | Array, high: Sequence[float] | Array, yaw: float = 0.0) -> Box:
         """The box spanning ``low``-``high`` in the local frame (turned by ``yaw`` about its
         own vertical axis)."""
         lo, hi = np.asarray(low, np.float64), np.asarray(high, np.float64)
         return Box(self.origin + self.rotation @ ((lo + hi) / 2), hi - lo, self.rotation @ yaw_matrix(yaw))
 
-    def region(self, low: Sequence[float], high: Sequence[float]) -> Region:
+    def region(self, low: Sequence[float] | Array, high: Sequence[float] | Array) -> Region:
         """The region spanning ``low``-``high`` in the local frame."""
         lo, hi = np.asarray(low, np.float64), np.asarray(high, np.float64)
         return Region(self.origin + self.rotation @ ((lo + hi) / 2), (hi - lo) / 2, self.rotation.copy())
@@ -131,6 +124,9 @@ class ClutteredConfig:
     problem_tries: int = 12
     #: an outside end keeps this far from the furniture's hull
     hull_margin: float = 0.02
+    #: an inside end has the centres of all its body parts (the S-shape's five bars) in
+    #: its region grown by this much
+    part_margin: float = 0.03
     #: shelves: chance that both ends lie in two different compartments
     two_compartments: float = 0.3
 
@@ -162,8 +158,13 @@ def _loose_boxes(
     for _ in range(n):
         size = np.array([rng.uniform(0.06, 0.16), rng.uniform(0.06, 0.16), rng.uniform(0.06, max_height)])
         x, y = rng.uniform(area[0], area[1]), rng.uniform(area[2], area[3])
-        out.append(frame.box([x - size[0] / 2, y - size[1] / 2, z], [x + size[0] / 2, y + size[1] / 2, z + size[2]],
-                             float(rng.uniform(-0.5, 0.5))))
+        out.append(
+            frame.box(
+                [x - size[0] / 2, y - size[1] / 2, z],
+                [x + size[0] / 2, y + size[1] / 2, z + size[2]],
+                float(rng.uniform(-0.5, 0.5)),
+            )
+        )
     return out
 
 
@@ -180,8 +181,9 @@ def _shelf_gaps(rng: np.random.Generator) -> list[float]:
 def build_shelves(rng: np.random.Generator, config: ClutteredConfig) -> Layout:
     """A bookcase, its back against a wall of the workspace: width 0.6-0.9, depth
     0.34-0.44, two or three compartments (see :func:`_shelf_gaps`) above a plinth, boards
-    ``config.thickness`` thick, 0-2 small boxes on each board. The compartments 0.3 tall or
-    more are the inside regions."""
+    ``config.thickness`` thick, 0-2 small boxes on each board. Every compartment is an
+    inside region (the S-shape fits in the narrow ones only lying down, so the sampler
+    rarely finds it a place there)."""
     t = config.thickness
     width, depth = float(rng.uniform(0.6, 0.9)), float(rng.uniform(0.34, 0.44))
     plinth = float(rng.uniform(0.0, 0.12))
@@ -209,8 +211,7 @@ def build_shelves(rng: np.random.Generator, config: ClutteredConfig) -> Layout:
         n_objects = int(rng.integers(0, 3))
         area = (-w + t + 0.08, w - t - 0.08, -d + 0.08, d - t - 0.08)
         boxes += _loose_boxes(frame, rng, n_objects, area, z + t, min(0.16, gaps[i] - 0.1))
-        if gaps[i] >= 0.3:
-            inside.append(frame.region([-w + t + 0.04, -d + 0.02, z + t + 0.04], [w - t - 0.04, d - t - 0.06, top - 0.04]))
+        inside.append(frame.region([-w + t + 0.04, -d + 0.02, z + t + 0.01], [w - t - 0.04, d - t - 0.06, top - 0.01]))
         z = top
     hull = frame.region([-w, -d, 0.0], [w, d + 0.2, height])
     return Layout("shelves", boxes, inside, hull)
@@ -229,8 +230,8 @@ def build_cage(rng: np.random.Generator, config: ClutteredConfig) -> Layout:
     """A floating cage of bars 0.025-0.04 thick, sides 0.5-0.7: posts at the corners and
     rails along the top and bottom edges; each of the four walls gets 0-2 inner posts, the
     roof and the bottom 0-2 inner bars, and a rail may run round the middle. One wall (the
-    door) keeps no inner posts, and the middle rail only leaves openings 0.22+ high, so
-    the S-shape can get in by turning."""
+    door) keeps no inner posts, and the middle rail (only in cages 0.62 tall or more) leaves
+    openings 0.25+ high, so the S-shape can get in by turning."""
     size = rng.uniform(0.5, 0.7, 3)
     bar = float(rng.uniform(0.025, 0.04))
     frame = _place(rng, (float(size[0]), float(size[1])), z0=0.0)
@@ -264,7 +265,7 @@ def build_cage(rng: np.random.Generator, config: ClutteredConfig) -> Layout:
     for sz in (-ez, ez):  # inner bars of the roof and the bottom
         for c in _bar_positions(rng, float(size[1]), bar, 2)[1:-1]:
             boxes.append(bar_along(0, (c, sz)))
-    if size[2] >= 0.56 and rng.random() < 0.5:  # a rail round the middle
+    if size[2] >= 0.62 and rng.random() < 0.5:  # a rail round the middle
         zm = float(rng.uniform(-0.03, 0.03))
         boxes += [bar_along(0, (sy, zm)) for sy in (-ey, ey)] + [bar_along(1, (sx, zm)) for sx in (-ex, ex)]
     m = bar + 0.03
@@ -360,7 +361,7 @@ def layout_of(scene: Scene) -> Layout | None:
     return layout if isinstance(layout, Layout) else None
 
 
-class Cluttered3DScenario(Scenario):
+class Cluttered3DScenario(Scenario3D):
     """3D-Cluttered: one piece of furniture per workspace (shelves, a cage, a table or an
     open box, see the module docstring), only boxes; problems from inside the furniture
     to outside it (either way round), preferably with a blocked straight line.
@@ -369,43 +370,18 @@ class Cluttered3DScenario(Scenario):
     ``config``: a :class:`ClutteredConfig`."""
 
     name = "cluttered3d"
-    horizon = 80
-    default_robot = "sphere3d"
 
     def __init__(self, robot: str | Robot | None = None, config: ClutteredConfig | None = None) -> None:
-        robot = robot if robot is not None else self.default_robot
-        self.robot = make_robot(robot) if isinstance(robot, str) else robot
-        if self.robot.dim != 3:
-            raise ValueError(
-                f"{self.name} is a 3D scenario; robot {self.robot.name} is {self.robot.dim}D (use sphere3d or sshape)"
-            )
-        self.config = config or ClutteredConfig()
-        unknown = set(self.config.kinds) - set(BUILDERS)
-        if unknown or not self.config.kinds:
+        super().__init__(robot)
+        self.layouts = config or ClutteredConfig()
+        unknown = set(self.layouts.kinds) - set(BUILDERS)
+        if unknown or not self.layouts.kinds:
             raise ValueError(f"unknown layout kinds {sorted(unknown)}; use some of {', '.join(KINDS)}")
-        self._cache: OrderedDict[tuple[str, int], Scene] = OrderedDict()
 
-    @property
-    def bounds(self) -> tuple[Array, Array]:
-        return LOW.copy(), HIGH.copy()
-
-    def scene(self, split: str, index: int) -> Scene:
-        """Workspace ``index`` of ``split`` (``train``, ``val`` or ``test``), built once and
-        kept in a small cache; its :class:`Layout` is ``layout_of(scene)``."""
-        key = (split, int(index))
-        s = self._cache.get(key)
-        if s is None:
-            s = self.build(workspace_rng(self.name, split, index))
-            s.name = f"{self.name}/{split}/{index}"
-            self._cache[key] = s
-            if len(self._cache) > 512:
-                self._cache.popitem(last=False)
-        return s
-
-    def build(self, rng: np.random.Generator) -> Scene:
-        """A new workspace drawn from ``rng``: the kind, then its layout."""
-        kind = self.config.kinds[int(rng.integers(0, len(self.config.kinds)))]
-        layout = BUILDERS[kind](rng, self.config)
+    def build(self, rng: np.random.Generator, split: str) -> Scene:
+        """A new workspace drawn from ``rng``: the kind, then its layout (``layout_of(scene)``)."""
+        kind = self.layouts.kinds[int(rng.integers(0, len(self.layouts.kinds)))]
+        layout = BUILDERS[kind](rng, self.layouts)
         scene = Scene(layout.boxes, LOW, HIGH)
         scene.__dict__["layout"] = layout
         return scene
@@ -419,7 +395,7 @@ class Cluttered3DScenario(Scenario):
         if layout is None:
             return super().sample_problem(scene, rng)
         first: tuple[Array, Array] | None = None
-        for _ in range(self.config.problem_tries):
+        for _ in range(self.layouts.problem_tries):
             pair = self._draw_pair(scene, layout, rng)
             if pair is None:
                 continue
@@ -433,33 +409,42 @@ class Cluttered3DScenario(Scenario):
         a = self.free_in(scene, inside, rng)
         if a is None:
             return None
-        if len(inside) > 1 and rng.random() < self.config.two_compartments:
+        if len(inside) > 1 and rng.random() < self.layouts.two_compartments:
             b = self.free_in(scene, [r for r in inside if not r.contains(a[None, :3])[0]], rng)
         else:
             b = self.free_outside(scene, layout.hull, rng)
-        if b is None or np.linalg.norm(a[:3] - b[:3]) < self.config.min_goal_distance:
+        if b is None or np.linalg.norm(a[:3] - b[:3]) < self.layouts.min_goal_distance:
             return None
         return (a, b) if rng.random() < 0.5 else (b, a)
 
-    def _free(self, scene: Scene, pos: Array, rng: np.random.Generator) -> Array | None:
+    def _free(self, scene: Scene, pos: Array, rng: np.random.Generator, within: Region | None = None) -> Array | None:
         """The first free configuration at positions ``pos`` (in the bounds), random
-        orientations; ``None`` if none is free."""
+        orientations, with the centres of all its body parts ``within`` a region (grown by
+        ``part_margin``) if one is given; ``None`` if there is none."""
         pos = pos[np.all((pos >= scene.low) & (pos <= scene.high), axis=1)]
         if not len(pos):
             return None
         q = np.concatenate([pos, self.robot.sample_orientation(rng, len(pos))], axis=1)
-        free = ~self.robot.collides(scene.world, q)
-        return q[int(np.argmax(free))] if free.any() else None
+        ok: Bool = np.ones(len(q), dtype=bool)
+        if within is not None:
+            sc, bc, _, _ = self.robot.world_parts(q)
+            centres = np.concatenate([sc, bc], axis=1).reshape(-1, 3)
+            ok = np.all(within.contains(centres, self.layouts.part_margin).reshape(len(q), -1), axis=1)
+        if ok.any():
+            ok[ok] = ~self.robot.collides(scene.world, q[ok])
+        return q[int(np.argmax(ok))] if ok.any() else None
 
     def free_in(
         self, scene: Scene, regions: Sequence[Region], rng: np.random.Generator, tries: int = 64, batch: int = 32
     ) -> Array | None:
-        """A free configuration whose position lies in one of ``regions`` (tried in turn),
-        or ``None`` when ``tries`` batches of ``batch`` draws found none."""
+        """A free configuration whose position and body part centres lie in one of
+        ``regions`` (tried in turn), or ``None`` when ``tries`` batches of ``batch`` draws
+        found none."""
         if not regions:
             return None
         for k in range(tries):
-            q = self._free(scene, regions[k % len(regions)].sample(rng, batch), rng)
+            region = regions[k % len(regions)]
+            q = self._free(scene, region.sample(rng, batch), rng, within=region)
             if q is not None:
                 return q
         return None
@@ -471,7 +456,7 @@ class Cluttered3DScenario(Scenario):
         ``hull_margin``)."""
         for _ in range(tries):
             pos = rng.uniform(scene.low, scene.high, (batch, 3))
-            q = self._free(scene, pos[~hull.contains(pos, self.config.hull_margin)], rng)
+            q = self._free(scene, pos[~hull.contains(pos, self.layouts.hull_margin)], rng)
             if q is not None:
                 return q
         return None
@@ -485,13 +470,3 @@ class Cluttered3DScenario(Scenario):
         if np.any(pos < scene.low - 1e-9) or np.any(pos > scene.high + 1e-9):
             return False
         return not bool(self.robot.collides(scene.world, q).any())
-
-
-def workspace_rng(scenario: str, split: str, index: int) -> np.random.Generator:
-    """The random stream of workspace ``index`` of ``split`` in ``scenario`` (the seeding
-    of every 3D scenario: splits never share a stream)."""
-    if split not in SPLIT_KEYS:
-        raise ValueError(f"unknown split {split!r}; use 'train', 'val' or 'test'")
-    if index < 0:
-        raise ValueError("workspace index must be >= 0")
-    return np.random.default_rng(np.random.SeedSequence([zlib.crc32(scenario.encode()), SPLIT_KEYS[split], int(index)]))

@@ -5,13 +5,19 @@ It imports every scenario module and none of them imports it.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from ..robots.base import Robot
 from .base import Scenario
+from .cluttered import Cluttered3DScenario
 from .mbm import MBM_SCENARIOS
 from .mbm import SCENARIOS as MBM_NAMES
 from .narrow2d_variants import VARIANT_NAMES, VARIANT_SCENARIOS
 from .scenes2d import Empty2DScenario, Narrow2DScenario
-from .scenes3d import SCENARIOS_3D
+from .scenes3d import SCENARIOS_3D as _SCENES3D_MODULE
+
+#: the 3D scenarios of the sphere and the S-shape (scenes3d's and the cluttered layouts)
+SCENARIOS_3D: dict[str, Callable[..., Scenario]] = {**_SCENES3D_MODULE, "cluttered3d": Cluttered3DScenario}
 
 #: the 2D scenarios: 2D-Narrow, its variants (narrow2d-ends, -many, -narrow, -manynarrow), the empty square
 SCENARIOS: dict[str, type[Scenario]] = {"narrow2d": Narrow2DScenario, "empty2d": Empty2DScenario, **VARIANT_SCENARIOS}

@@ -23,7 +23,6 @@ from ..robots import make_robot
 from ..robots.base import Robot
 from ..robots.sshape import BAR_THICKNESS
 from .base import Scenario
-from .cluttered import Cluttered3DScenario
 from .narrow2d import SPLIT_KEYS
 from .scene import DynamicScene, Scene
 
@@ -412,5 +411,4 @@ SCENARIOS_3D: dict[str, Callable[..., Scenario]] = {
     "slotfixed": SlotFixedScenario,
     "slotclassic": SlotClassicScenario,
     "qureshi3d": Qureshi3DScenario,
-    "cluttered3d": Cluttered3DScenario,
 }
