@@ -32,9 +32,9 @@ def test_lockstep_and_one_robot_steppers_agree(env: str, robot: str | None, obse
 
 
 def test_compiled_stepper_is_chosen_by_capability() -> None:
-    """The compiled rollout is used for a ball seeing plain point subsets; a perturbed
-    observer (its own observe_one) keeps the one-robot stepper; the ray-cast observer has
-    no one-robot form and goes through the batched core."""
+    """The compiled rollout is used for a ball seeing plain point subsets and for a robot
+    seeing rays; a perturbed observer (its own observe_one) keeps the one-robot stepper;
+    the nearest-rays observer has no one-robot form and goes through the batched core."""
     from pointplan.observers.perturb import perturbation
 
     sc = make_scenario("boxes3d", robot="sphere3d")
@@ -43,11 +43,13 @@ def test_compiled_stepper_is_chosen_by_capability() -> None:
     noisy = PolicyPlanner(shipped_checkpoint("sphere3d", "global"), observer_wrapper=perturbation(noise=0.005))
     assert noisy.engine.one_robot() and noisy.engine.compiled() is None
     rays = PolicyPlanner(shipped_checkpoint("sphere3d", "local"))
-    assert not rays.engine.one_robot() and rays.engine.compiled() is None
+    assert rays.engine.one_robot() and rays.engine.compiled() is None and rays.engine.compiled_rays() is not None
     p = sc.problem("val", 0, seed=0)
-    res = rays.plan(p)
-    assert "time_split" not in res.info  # (the batched core keeps no per-step timing)
+    assert "compiled" in rays.plan(p).info["time_split"]
     assert "compiled" in plain.plan(p).info["time_split"]
+    from pointplan.observers.rays import NearestRays
+
+    assert not NearestRays.one_robot  # its subset is drawn otherwise: the batched core steps it
 
 
 def test_options_are_validated_once() -> None:

@@ -88,6 +88,7 @@ class LocalRays(Observer):
     with_normals = True
     #: keep the ``n_points`` hits nearest to the body instead of a random subset
     nearest = False
+    one_robot = True
 
     def __init__(
         self, robot: Robot, n_points: int = 64, n_rays: int = 256, max_range: float = 0.7, spacing: float = 0.06
@@ -153,6 +154,35 @@ class LocalRays(Observer):
         ok &= np.all((origins > low) & (origins < high), axis=-1)
         return np.where(ok[..., None], hits.points, 0.0), np.where(ok[..., None], hits.normals, 0.0), ok
 
+    def draws_one(self) -> int:
+        """How many uniform numbers one observation of the single bound static scene draws
+        (the subset's keys, one per ray, then the duplicates' draws)."""
+        return len(self.body_origins) + self.n_points
+
+    def observe_one(
+        self, q: Array, rng: np.random.Generator | None = None, u: Array | None = None
+    ) -> NDArray[np.float32]:
+        """``observe(q[None], rng)[0]`` for an observer bound to one static scene, from the
+        ``draws_one()`` uniform numbers ``u`` (or drawn from ``rng``): the same rays, the
+        same subset, the same values."""
+        n_rays, n = len(self.body_origins), self.n_points
+        if u is None:
+            assert rng is not None
+            u = rng.random(n_rays + n)
+        q = np.asarray(q, np.float64)[None]
+        pw, nw, ok = self.cast(q)
+        kept = np.flatnonzero(thin_grid(pw, nw, ok, self.spacing)[0])  # in ray order
+        count = len(kept)
+        if count == 0:
+            return np.zeros((n, 6), np.float32)
+        pos = np.argsort(u[:count])[:n]
+        if count < n:
+            pos = np.concatenate([pos, (u[n_rays + count : n_rays + n] * count).astype(np.int64)])
+        sel = kept[pos]
+        pb, nb = self.robot.to_body_frame(q, pw[:, sel], nw[:, sel])
+        assert nb is not None
+        return np.concatenate([pb[0], nb[0]], -1).astype(np.float32)
+
     def observe(self, q: Array, rng: np.random.Generator, t: NDArray[np.int64] | None = None) -> NDArray[np.float32]:
         q = np.asarray(q, np.float64)
         pw, nw, ok = self.cast(q, t)
@@ -192,6 +222,7 @@ class NearestRays(LocalRays):
 
     name = "local-near"
     nearest = True
+    one_robot = False  # (its subset draws differ; it steps in lockstep)
 
 
 class WideRays(LocalRays):

@@ -38,6 +38,7 @@ from ..robots._body_kernels import (
     motion_free,
 )
 from ._policy_kernels import (
+    END_ESCAPE,
     END_GREEDY,
     END_HORIZON,
     END_STALLED,
@@ -45,8 +46,11 @@ from ._policy_kernels import (
     END_TOL_BLOCKED,
     END_TOL_GOAL,
     _network,
+    _q_free,
+    _segment_hits,
     _workspace,
 )
+from ._policy_kernels import _edge_free as _ball_edge_free
 
 #: as in pointplan.robots.motion and pointplan.planners.base (literals for the compiler)
 _GRID_SLACK = 1e-9
@@ -55,9 +59,19 @@ _IN_BOUNDS_EPS = 1e-9
 END_AT_GOAL = 7
 
 #: ``fparams`` of :func:`rollout_rigid`
-F_SUBSTEP, F_GOAL_TOL, F_STALL_DIST, F_RESOLUTION, F_S0, F_ESC_STILL, F_ESC_NOISE, F_NOISE, F_RANGE, F_SPACING = range(
-    10
-)
+(
+    F_SUBSTEP,
+    F_GOAL_TOL,
+    F_STALL_DIST,
+    F_RESOLUTION,
+    F_S0,
+    F_ESC_STILL,
+    F_ESC_NOISE,
+    F_NOISE,
+    F_RANGE,
+    F_SPACING,
+    F_RADIUS,
+) = range(11)
 #: ``iparams`` of :func:`rollout_rigid`
 (
     I_HORIZON,
@@ -70,7 +84,11 @@ F_SUBSTEP, F_GOAL_TOL, F_STALL_DIST, F_RESOLUTION, F_S0, F_ESC_STILL, F_ESC_NOIS
     I_ESC_WINDOW,
     I_ESC_STEPS,
     I_SAMPLED,
-) = range(10)
+    I_ROBOT,
+    I_HANDOVER,
+) = range(12)
+#: ``I_ROBOT``: a translating ball, or a free-flying body of boxes
+BALL, BODY = 0, 1
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
@@ -119,7 +137,18 @@ def _edge_free(a, b, resolution, low, high, body, boxes, ws):  # type: ignore[no
 
 # ------------------------------------------------------------------ the observation
 @_jit
-def _cast(q, rays, rboxes, low, high, max_range, hits, rot, scratch):  # type: ignore[no-untyped-def]
+def _frame(kind, q, rot):  # type: ignore[no-untyped-def]
+    """The robot's rotation: the identity for a ball, the pose's for a body."""
+    if kind == BALL:
+        for i in range(3):
+            for j in range(3):
+                rot[i, j] = 1.0 if i == j else 0.0
+    else:
+        _rotation(q, rot)
+
+
+@_jit
+def _cast(q, kind, rays, rboxes, low, high, max_range, hits, rot, scratch):  # type: ignore[no-untyped-def]
     """``LocalRays.cast`` for one robot: rays from the body (``rays``: body-frame origins
     and directions ``(R, 3)``) against the boxes ``rboxes`` (obstacles and wall slabs,
     with a validity flag each); writes ``hits (R, 7)``: point, normal, and 1.0 where the
@@ -127,7 +156,7 @@ def _cast(q, rays, rboxes, low, high, max_range, hits, rot, scratch):  # type: i
     bo, bd = rays
     box_c, box_r, box_h, valid = rboxes
     o, d, t0, t1, ax = scratch
-    _rotation(q, rot)
+    _frame(kind, q, rot)
     nr, nk = bo.shape[0], box_c.shape[0]
     for r in range(nr):
         for i in range(3):
@@ -200,13 +229,13 @@ def _thin(hits, spacing, kept):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _observe(q, u, rays, rboxes, low, high, max_range, spacing, s32, obs, ows):  # type: ignore[no-untyped-def]
+def _observe(q, kind, u, rays, rboxes, low, high, max_range, spacing, s32, obs, ows):  # type: ignore[no-untyped-def]
     """The network's input for ``LocalRays.observe`` of one robot from the draws ``u`` (``R
     + n`` uniform numbers: the subset's keys, then the duplicates' draws): ``obs (n, 6)``
     float32, positions in steps (``/ s32``) and normals in the robot frame (all zero when
     nothing is seen). ``ows``: :func:`_obs_scratch`."""
     hits, kept, rot, scratch = ows
-    _cast(q, rays, rboxes, low, high, max_range, hits, rot, scratch)
+    _cast(q, kind, rays, rboxes, low, high, max_range, hits, rot, scratch)
     count = _thin(hits, spacing, kept)
     n, nr = obs.shape[0], hits.shape[0]
     if count == 0:
@@ -248,49 +277,100 @@ def _obs_scratch(n_rays, n_boxes):  # type: ignore[no-untyped-def]
 @_jit
 def _act(q, goal, u, noise, sampled, rays, rboxes, low, high, fparams, iparams, scale, wflat, layout, ows, nws):  # type: ignore[no-untyped-def]
     """The action (float32 ``(action_dim,)``, a view into ``nws``) at ``q`` toward ``goal``
-    for the draws ``u``: the observation, the goal input ``log(q^-1 goal) / scale``, the
-    network."""
+    for the draws ``u``: the observation, the goal input ``log(q^-1 goal) / scale``
+    (``(goal - q) / scale`` for a ball), the network."""
+    kind = iparams[I_ROBOT]
     h = nws[0]
     vec = nws[4]
     width, features = layout[0], layout[1]
     obs = ows[4]
     _observe(
-        q, u, rays, rboxes, low, high, fparams[F_RANGE], fparams[F_SPACING], np.float32(fparams[F_S0]), obs, ows[:4]
+        q,
+        kind,
+        u,
+        rays,
+        rboxes,
+        low,
+        high,
+        fparams[F_RANGE],
+        fparams[F_SPACING],
+        np.float32(fparams[F_S0]),
+        obs,
+        ows[:4],
     )
     np.dot(obs, wflat[: features * width].reshape(features, width), h)
     b0 = wflat[features * width : features * width + width]
     for p in range(h.shape[0]):
         for o in range(width):
             h[p, o] += b0[o]
-    g = np.empty(6)
-    _log(q, goal, g)
     z = vec[width + features + width :]
-    for i in range(6):
-        z[i] = np.float32(g[i] / scale[i])
-    return _network(nws, wflat, layout, 6, iparams[I_ACTION_DIM], noise, sampled)
+    gdim = scale.shape[0]
+    if kind == BALL:
+        for i in range(gdim):
+            z[i] = np.float32((goal[i] - q[i]) / scale[i])
+    else:
+        g = np.empty(6)
+        _log(q, goal, g)
+        for i in range(gdim):
+            z[i] = np.float32(g[i] / scale[i])
+    return _network(nws, wflat, layout, gdim, iparams[I_ACTION_DIM], noise, sampled)
 
 
 @_jit
-def _finish(end, path, t, goal, greedy, connect, resolution, low, high, body, boxes, ws):  # type: ignore[no-untyped-def]
+def _r_move(kind, q, tw, substep, clip_target, low, high, radius, body, boxes, ws, new_q):  # type: ignore[no-untyped-def]
+    """``q_free`` of one step of the ball or the body: ``(collided, checks)``."""
+    if kind == BALL:
+        return _q_free(q, tw, radius, low, high, boxes[0], boxes[1], boxes[2], substep, clip_target, new_q)
+    return _move(q, tw, substep, clip_target, low, high, body, boxes, ws, new_q)
+
+
+@_jit
+def _r_goal_free(kind, q, goal, resolution, low, high, radius, body, boxes, ws, quick):  # type: ignore[no-untyped-def]
+    """The edge to the goal as ``GoalTester`` (``quick``: a ball's quick test first, its
+    checks counted) or ``connect_to_goal`` checks it: ``(free, checks)``."""
+    if kind == BODY:
+        return _edge_free(q, goal, resolution, low, high, body, boxes, ws)
+    checks = 0
+    if quick:
+        hit, c = _segment_hits(q, goal, radius * (1.0 - 1e-9), resolution, boxes[0], boxes[1], boxes[2])
+        checks += c
+        if hit:
+            return False, checks
+    ok, c = _ball_edge_free(q, goal, radius, resolution, low, high, boxes[0], boxes[1], boxes[2])
+    return ok, checks + c
+
+
+@_jit
+def _r_distance(kind, a, b, tmp):  # type: ignore[no-untyped-def]
+    if kind == BODY:
+        return _distance(a, b, tmp)
+    s = 0.0
+    for i in range(a.shape[0]):
+        s += (b[i] - a[i]) ** 2
+    return math.sqrt(s)
+
+
+@_jit
+def _finish(kind, end, path, t, goal, greedy, connect, resolution, low, high, radius, body, boxes, ws):  # type: ignore[no-untyped-def]
     """The end of a rollout that stopped at ``path[t]`` with code ``end``: the goal test
     there (``greedy``), the edge to the goal from within the tolerance (``connect``), the
     goal appended where the path ends there. Returns ``(end, rows, checks)``."""
     checks = 0
     if greedy and end in (END_HORIZON, END_STALLED):  # the goal from where the rollout stopped
-        ok, c = _edge_free(path[t], goal, resolution, low, high, body, boxes, ws)
+        ok, c = _r_goal_free(kind, path[t], goal, resolution, low, high, radius, body, boxes, ws, True)
         checks += c
         if ok:
             end = END_GREEDY
     if end == END_TOL and connect:
-        if _distance(path[t], goal, ws[9][0]) <= 0.0:
+        if _r_distance(kind, path[t], goal, ws[9][0]) <= 0.0:
             end = END_AT_GOAL
         else:
-            ok, c = _edge_free(path[t], goal, resolution, low, high, body, boxes, ws)
+            ok, c = _r_goal_free(kind, path[t], goal, resolution, low, high, radius, body, boxes, ws, False)
             checks += c
             end = END_TOL_GOAL if ok else END_TOL_BLOCKED
     rows = t + 1
     if end in (END_GREEDY, END_TOL_GOAL):
-        for i in range(7):
+        for i in range(goal.shape[0]):
             path[rows, i] = goal[i]
         rows += 1
     return end, rows, checks
@@ -300,78 +380,82 @@ def _finish(end, path, t, goal, greedy, connect, resolution, low, high, body, bo
 def rollout_rigid(  # type: ignore[no-untyped-def]
     q0, goal, low, high, boxes, rboxes, body, rays, wflat, layout, scale, fparams, iparams, stream, normals, path
 ):
-    """One rollout of ``RolloutEngine.plan`` (one attempt) for the S-shape seeing rays:
-    at each configuration (the start included), with ``I_GREEDY``, the certified edge to
-    the goal (stop at the goal when free); the action for the step's draws (``stream``:
-    ``R + n`` uniform numbers a step; ``normals (horizon, action_dim)``: the normal draws
-    of sampled actions, one row a step, used where ``I_SAMPLED``: scaled by
-    ``F_ESC_NOISE`` during an escape, by ``F_NOISE`` otherwise); ``q_free``'s move; stop
-    within the goal tolerance, stalled or at the horizon; an escape of ``I_ESC_STEPS``
-    sampled steps after a step that ended less than ``F_ESC_STILL`` from where the robot
-    was ``I_ESC_WINDOW`` steps before. Then the goal test where it stopped and, with
-    ``I_CONNECT``, the edge to the goal from within the tolerance.
+    """One attempt of ``RolloutEngine.plan`` for a robot seeing rays (``I_ROBOT``: the
+    sphere or the S-shape), as the one-robot step loop makes it: at each configuration
+    (the start included), with ``I_GREEDY``, the certified edge to the goal (stop at the
+    goal when free); the action for the step's draws (``stream``: ``R + n`` uniform
+    numbers a step), sampled where the attempt is (``I_SAMPLED``, scaled by ``F_NOISE``)
+    and during an escape (scaled by ``F_ESC_NOISE``), each sampled step taking the next
+    row of ``normals``; ``q_free``'s move; stop within the goal tolerance, stalled or at
+    the horizon; an escape of ``I_ESC_STEPS`` sampled steps after a step that ended less
+    than ``F_ESC_STILL`` from where the robot was ``I_ESC_WINDOW`` steps before (with
+    ``I_HANDOVER``, stop there instead: ``END_ESCAPE``, for the step loop to go on). Then
+    the goal test where it stopped and, with ``I_CONNECT``, the edge to the goal from
+    within the tolerance.
 
     ``boxes``: the obstacle boxes ``(centres, rotations, half sides)``; ``rboxes``: the
     boxes rays hit (obstacles and wall slabs) and a validity flag each; ``body``:
-    ``(centres, half sides, corner map)`` of the robot's boxes; ``rays``: body-frame ray
-    origins and directions. Writes the path to ``path`` (``horizon + 2`` rows) and
-    returns ``(end code, rows, checks, escapes)``."""
-    horizon, stall_steps = iparams[I_HORIZON], iparams[I_STALL_STEPS]
+    ``(centres, half sides, corner map)`` of the S-shape's boxes (unused for the ball,
+    whose radius is ``F_RADIUS``); ``rays``: body-frame ray origins and directions. Writes
+    the path to ``path`` (``horizon + 2`` rows) and returns ``(end code, rows, checks,
+    escapes)``."""
+    kind, horizon, stall_steps = iparams[I_ROBOT], iparams[I_HORIZON], iparams[I_STALL_STEPS]
     greedy, connect, clip_target = iparams[I_GREEDY] != 0, iparams[I_CONNECT] != 0, iparams[I_CLIP] != 0
     esc_window, esc_steps, sampled = iparams[I_ESC_WINDOW], iparams[I_ESC_STEPS], iparams[I_SAMPLED] != 0
     substep, goal_tol, resolution = fparams[F_SUBSTEP], fparams[F_GOAL_TOL], fparams[F_RESOLUTION]
-    n_points, adim = iparams[I_N_POINTS], iparams[I_ACTION_DIM]
+    n_points, adim, radius = iparams[I_N_POINTS], iparams[I_ACTION_DIM], fparams[F_RADIUS]
     nr = rays[0].shape[0]
     blk = nr + n_points
     ws = _scratch(body[0].shape[0], boxes[0].shape[0])
     o4 = _obs_scratch(nr, rboxes[0].shape[0])
     ows = (o4[0], o4[1], o4[2], o4[3], np.empty((n_points, 6), np.float32))
-    nws = _workspace(n_points, layout, 6)
+    nws = _workspace(n_points, layout, adim)
     noise = np.zeros(adim, np.float32)
-    tw = np.empty(6)
+    tw = np.empty(adim)
     tmp = np.empty(6)
-    for i in range(7):
+    for i in range(q0.shape[0]):
         path[0, i] = q0[i]
-    checks, escapes, left, t = 0, 0, 0, 0
+    checks, escapes, left, t, drawn = 0, 0, 0, 0, 0
     end = END_HORIZON
     while t < horizon:
         q = path[t]
         if greedy:
-            ok, c = _edge_free(q, goal, resolution, low, high, body, boxes, ws)
+            ok, c = _r_goal_free(kind, q, goal, resolution, low, high, radius, body, boxes, ws, True)
             checks += c
             if ok:
                 end = END_GREEDY
                 break
         escaping = left > 0
-        if sampled:
+        noisy = escaping or sampled
+        if noisy:
             sd = fparams[F_ESC_NOISE] if escaping else fparams[F_NOISE]
             for i in range(adim):
-                noise[i] = np.float32(sd * normals[t, i])
+                noise[i] = np.float32(sd * normals[drawn, i])
+            drawn += 1
         u = stream[t * blk : (t + 1) * blk]
-        a = _act(q, goal, u, noise, sampled, rays, rboxes, low, high, fparams, iparams, scale, wflat, layout, ows, nws)
+        a = _act(q, goal, u, noise, noisy, rays, rboxes, low, high, fparams, iparams, scale, wflat, layout, ows, nws)
         if escaping:
             left -= 1
-        for i in range(6):
+        for i in range(adim):
             tw[i] = np.float64(min(max(a[i], np.float32(-1.0)), np.float32(1.0))) * scale[i]
-        collided, c = _move(q, tw, substep, clip_target, low, high, body, boxes, ws, path[t + 1])
+        collided, c = _r_move(kind, q, tw, substep, clip_target, low, high, radius, body, boxes, ws, path[t + 1])
         checks += c
         t += 1
         new_q = path[t]
-        if not collided and _distance(new_q, goal, tmp) < goal_tol:
+        if not collided and _r_distance(kind, new_q, goal, tmp) < goal_tol:
             end = END_TOL
             break
-        if (
-            stall_steps > 0
-            and t >= stall_steps
-            and _distance(new_q, path[t - stall_steps], tmp) < fparams[F_STALL_DIST]
-        ):
+        back = t - stall_steps
+        if stall_steps > 0 and back >= 0 and _r_distance(kind, new_q, path[back], tmp) < fparams[F_STALL_DIST]:
             end = END_STALLED
             break
         still = esc_steps > 0 and t >= esc_window and left == 0
-        if still and _distance(new_q, path[t - esc_window], tmp) < fparams[F_ESC_STILL]:
+        if still and _r_distance(kind, new_q, path[t - esc_window], tmp) < fparams[F_ESC_STILL]:
+            if iparams[I_HANDOVER] != 0:  # the step loop goes on from here
+                return END_ESCAPE, t + 1, checks, escapes
             left = esc_steps
             escapes += 1
-    end, rows, c = _finish(end, path, t, goal, greedy, connect, resolution, low, high, body, boxes, ws)
+    end, rows, c = _finish(kind, end, path, t, goal, greedy, connect, resolution, low, high, radius, body, boxes, ws)
     checks += c
     return end, rows, checks, escapes
 

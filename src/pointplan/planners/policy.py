@@ -131,13 +131,13 @@ class PolicyPlanner:
 
     def plan_many(self, problems: Sequence[Problem]) -> list[PlanResult]:
         """All problems, by the fastest way measured for the observer
-        (``benchmarks/bench_plan_many.py``): one by one through the one-robot or compiled
-        rollout where there is one (the same results as ``plan``; for the sphere's
-        ``global`` policy 67.5 queries/s against 6.9 in lockstep; the S-shape's ``local``
-        policy in scenes of boxes is compiled), otherwise in lockstep through the batched
-        core (the ray-cast ``local`` observation elsewhere: its observations are drawn for
-        the batch, so a rollout may differ from ``plan``'s). One by one also with an
-        ``observer_wrapper``, ``draws > 1`` or ``attempts > 1``."""
+        (``benchmarks/bench_plan_many.py``): one by one through the one-robot rollout
+        (compiled where it can be: the ball seeing points, the sphere and the S-shape
+        seeing rays, in scenes of boxes) where the observer has one (the same results as
+        ``plan``; for the sphere's ``global`` policy 67.5 queries/s against 6.9 in
+        lockstep), otherwise in lockstep through the batched core (its observations are
+        drawn for the batch, so a rollout may differ from ``plan``'s). One by one also with
+        an ``observer_wrapper``, ``draws > 1`` or ``attempts > 1``."""
         one_by_one = (
             self.engine.one_robot()
             or self.engine.observer_wrapper is not None
@@ -146,11 +146,7 @@ class PolicyPlanner:
         )
         if one_by_one:
             return [self.plan(p) for p in problems]
-        rays = self.engine.compiled_rays()
-        alone = [rays is not None and rays.applies(p.scene) for p in problems]
-        rest = [p for p, a in zip(problems, alone) if not a]
-        batched = iter(self.engine.run(rest) if rest else [])
-        return [self.plan(p) if a else next(batched) for p, a in zip(problems, alone)]
+        return self.engine.run(problems)
 
 
 __all__ = [

@@ -700,20 +700,20 @@ class RolloutEngine:
         """One rollout of ``problem``: the mean action (``sampled=False``: ``nrng`` draws
         the escapes) or sampled actions (``nrng`` draws them all)."""
         opts = self.options
-        rays = self.compiled_rays() if not problem.scene.dynamic else None
-        if rays is not None:
-            res = rays.rollout(problem, nrng, sampled, time.perf_counter())
-            if res is not None:
-                return res
         if problem.scene.dynamic or not self.one_robot():
             lock = replace(opts, noise=opts.action_noise if sampled else 0.0)
             with torch_threads(1):
                 return self.run([problem], noise_rng=nrng, options=lock)[0]
         t0 = time.perf_counter()
+        rays = self.compiled_rays()
         compiled = self.compiled() if not sampled else None
         st, t_compiled = None, None
-        if compiled is not None:
-            res, handover, t_compiled = compiled.rollout(problem, t0)
+        if rays is not None or compiled is not None:
+            if rays is not None:
+                res, handover, t_compiled = rays.rollout(problem, nrng, sampled, t0)
+            else:
+                assert compiled is not None
+                res, handover, t_compiled = compiled.rollout(problem, t0)
             if res is not None:
                 return res
             if handover is not None:

@@ -221,15 +221,19 @@ def _boxes_only(scene: Scene) -> bool:
 
 
 class CompiledRays:
-    """The compiled rollout of an engine whose robot is a free-flying body of boxes and
-    whose observer casts rays (:class:`~pointplan.observers.rays.LocalRays`): one call per
-    attempt, the mean action with its escape or a sampled attempt, in scenes of boxes.
-    Made by :meth:`build`."""
+    """The compiled rollout of an engine whose robot is the sphere or a free-flying body of
+    boxes (the S-shape) and whose observer casts rays
+    (:class:`~pointplan.observers.rays.LocalRays`): one call per attempt, in scenes of
+    boxes, the same rollout as the one-robot step loop's. The mean action with its escape,
+    or a sampled attempt; an escape toward a subgoal (the sphere's) is left to the step
+    loop, which goes on from where it starts. Made by :meth:`build`."""
 
-    def __init__(self, engine: EngineView, body: tuple[np.ndarray, ...], rays: tuple[np.ndarray, ...]) -> None:
+    def __init__(
+        self, engine: EngineView, kind: int, body: tuple[np.ndarray, ...], rays: tuple[np.ndarray, ...]
+    ) -> None:
         self.engine = engine
         fast, robot, observer = engine.fast, engine.robot, engine.observer
-        self.body, self.rays = body, rays
+        self.kind, self.body, self.rays = kind, body, rays
         self.weights = K.pack_weights(fast.inp, fast.hidden, fast.head)
         self.scale = np.ascontiguousarray(robot.action_scale, np.float64)
         self.blk = len(rays[0]) + int(observer.n_points)
@@ -239,31 +243,35 @@ class CompiledRays:
     @classmethod
     def build(cls, engine: EngineView) -> CompiledRays | None:
         """The compiled rollout of ``engine``, or ``None`` where it does not apply (another
-        robot or observer, a network of another shape, an escape toward a subgoal)."""
-        fast, robot, observer, esc = engine.fast, engine.robot, engine.observer, engine.escape
-        if fast is None or type(observer) not in (LocalRays, WideRays) or esc.subgoal:
+        robot or observer, a network of another shape)."""
+        fast, robot, observer = engine.fast, engine.robot, engine.observer
+        if fast is None or type(observer) not in (LocalRays, WideRays):
             return None
+        f = np.ascontiguousarray
         parts = robot.parts
-        if (
-            robot.dim != 3
-            or robot.twist_dim != 6
-            or robot.config_dim != 7
-            or len(parts.sphere_radii)
-            or not len(parts.box_halfs)
-            or not np.array_equal(parts.box_rotations, np.broadcast_to(np.eye(3), parts.box_rotations.shape))
+        if isinstance(robot, Sphere3D):
+            kind, body = RK.BALL, (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((6, 0)))
+        elif (
+            robot.dim == 3
+            and robot.twist_dim == 6
+            and robot.config_dim == 7
+            and not len(parts.sphere_radii)
+            and len(parts.box_halfs)
+            and np.array_equal(parts.box_rotations, np.broadcast_to(np.eye(3), parts.box_rotations.shape))
         ):
+            kind = RK.BODY
+            body = (f(parts.box_centers, np.float64), f(parts.box_halfs, np.float64), f(robot._corner_velocity))
+        else:
             return None
-        width = fast.inp[0].shape[1]
+        width, adim = fast.inp[0].shape[1], robot.twist_dim
         if (
             fast.inp[0].shape[0] != 6
             or any(w.shape != (width, width) for w, _ in fast.hidden)
-            or fast.head[0][0].shape[0] != width + 6
-            or fast.action_dim != 6
+            or fast.head[0][0].shape[0] != width + adim
+            or fast.action_dim != adim
         ):
             return None
-        f = np.ascontiguousarray
-        body = (f(parts.box_centers, np.float64), f(parts.box_halfs, np.float64), f(robot._corner_velocity))
-        return cls(engine, body, (f(observer.body_origins, np.float64), f(observer.body_dirs, np.float64)))
+        return cls(engine, kind, body, (f(observer.body_origins, np.float64), f(observer.body_dirs, np.float64)))
 
     @staticmethod
     def applies(scene: Scene) -> bool:
@@ -282,53 +290,69 @@ class CompiledRays:
         rboxes = (f(rw.box_c, np.float64), f(rw.box_r, np.float64), f(rw.box_h, np.float64), np.any(rw.box_h > 0, -1))
         return boxes, rboxes, f(scene.low, np.float64), f(scene.high, np.float64)
 
-    def rollout(self, problem: Problem, nrng: np.random.Generator, sampled: bool, t0: float) -> PlanResult | None:
+    def _params(self, sampled: bool) -> tuple[np.ndarray, np.ndarray]:
+        """The kernel's ``fparams`` and ``iparams`` for an attempt."""
+        eng = self.engine
+        opts, esc, env, observer = eng.options, eng.escape, eng.env, eng.observer
+        fparams = np.zeros(11)
+        fparams[[RK.F_SUBSTEP, RK.F_GOAL_TOL, RK.F_STALL_DIST, RK.F_RESOLUTION, RK.F_S0]] = (
+            env.substep,
+            env.goal_tolerance,
+            opts.stall_distance,
+            0.01,  # the goal edge: as GoalTester and connect_to_goal check it
+            float(eng.robot.action_scale[0]),
+        )
+        fparams[[RK.F_ESC_STILL, RK.F_ESC_NOISE, RK.F_NOISE, RK.F_RANGE, RK.F_SPACING, RK.F_RADIUS]] = (
+            esc.still,
+            esc.noise,
+            opts.action_noise if sampled else 0.0,
+            observer.max_range,
+            observer.spacing,
+            float(getattr(eng.robot, "radius", 0.0)),
+        )
+        iparams = np.zeros(12, np.int64)
+        iparams[:] = (
+            eng.horizon,
+            int(opts.stall_steps or 0),
+            int(opts.greedy_goal),
+            int(opts.connect_goal),
+            int(env.bounds == "clip"),
+            int(observer.n_points),
+            eng.robot.twist_dim,
+            esc.window,
+            esc.steps if esc.on else 0,
+            int(sampled),
+            self.kind,
+            int(esc.on and esc.subgoal),  # an escape toward a subgoal: the step loop's
+        )
+        return fparams, iparams
+
+    def rollout(
+        self, problem: Problem, nrng: np.random.Generator, sampled: bool, t0: float
+    ) -> tuple[PlanResult | None, tuple[np.ndarray, int] | None, float | None]:
         """One attempt of ``RolloutEngine.plan`` (the mean action with the escape drawn
-        from ``nrng``, or with ``sampled`` every action drawn from it), or ``None`` where
-        the scene is not boxes only."""
+        from ``nrng``, or with ``sampled`` every action drawn from it): ``(result, None,
+        None)``; ``(None, (path, checks), seconds)`` where an escape toward a subgoal
+        starts (the step loop goes on from there); ``(None, None, None)`` where it does
+        not apply (a scene not of boxes only; a sampled attempt with subgoal escapes)."""
+        esc = self.engine.escape
+        if sampled and esc.on and esc.subgoal:
+            return None, None, None
         scene = problem.scene
         if scene is not self._scene:
             self._scene_args = self._scene_inputs(scene)
             self._scene = scene
         if self._scene_args is None:
-            return None
+            return None, None, None
         boxes, rboxes, low, high = self._scene_args
         eng = self.engine
-        opts, esc, env, observer = eng.options, eng.escape, eng.env, eng.observer
-        horizon = eng.horizon
-        noisy = esc.on or sampled  # the step loop then draws normals at every step
-        normals = nrng.standard_normal((horizon, 6)) if noisy else np.zeros((0, 6))
-        fparams = np.array(
-            [
-                env.substep,
-                env.goal_tolerance,
-                opts.stall_distance,
-                0.01,  # the goal edge: as GoalTester and connect_to_goal check it
-                float(eng.robot.action_scale[0]),
-                esc.still,
-                esc.noise,
-                opts.action_noise if sampled else 0.0,
-                observer.max_range,
-                observer.spacing,
-            ]
-        )
-        iparams = np.array(
-            [
-                horizon,
-                int(opts.stall_steps or 0),
-                int(opts.greedy_goal),
-                int(opts.connect_goal),
-                int(env.bounds == "clip"),
-                int(observer.n_points),
-                6,
-                esc.window,
-                esc.steps if esc.on else 0,
-                int(noisy),
-            ],
-            np.int64,
-        )
+        horizon, adim = eng.horizon, eng.robot.twist_dim
+        # the sampled steps' normal draws, in the order the step loop takes them
+        noisy = sampled or (esc.on and not esc.subgoal)
+        normals = nrng.standard_normal((horizon, adim)) if noisy else np.zeros((0, adim))
+        fparams, iparams = self._params(sampled)
         start, goal = (np.ascontiguousarray(x, np.float64) for x in (problem.start, problem.goal))
-        path = np.empty((horizon + 2, 7))
+        path = np.empty((horizon + 2, eng.robot.config_dim))
         stream = eng._uniforms(horizon * self.blk)
         t1 = time.perf_counter()
         end, rows, checks, escapes = RK.rollout_rigid(
@@ -336,7 +360,9 @@ class CompiledRays:
             stream, normals, path,
         )  # fmt: skip
         t2 = time.perf_counter()
-        return self._result(end, path[:rows], checks, escapes, t2 - t1, time.perf_counter() - t0)
+        if end == K.END_ESCAPE:
+            return None, (path[:rows].copy(), int(checks)), t2 - t1
+        return self._result(end, path[:rows], checks, escapes, t2 - t1, time.perf_counter() - t0), None, None
 
     def _result(self, end: int, path: np.ndarray, checks: int, escapes: int, dt: float, total: float) -> PlanResult:
         """The :class:`PlanResult` the step loop gives for a rollout that ended so."""
