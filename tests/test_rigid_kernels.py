@@ -104,7 +104,7 @@ def test_moves_and_edges_are_q_free_and_edge_free(planner: object, problems: lis
     rng = np.random.default_rng(3)
     kinds = set()
     for k, p in enumerate(problems[:8]):
-        compiled, boxes, rboxes, low, high = _scene_args(planner, p)
+        compiled, boxes, rboxes, _, _, low, high = _scene_args(planner, p)
         ws = BK._scratch(5, len(boxes[0]))
         qs = _free_configs(p, 25, 10 + k)
         for i, q in enumerate(qs):
@@ -125,22 +125,22 @@ def test_network_is_the_numpy_actor(planner: object, problems: list[Problem]) ->
     fast: NumpyPointNetActor = planner.engine.fast  # type: ignore[attr-defined]
     wflat, layout = pack_weights(fast.inp, fast.hidden, fast.head)
     rng = np.random.default_rng(4)
-    compiled, boxes, rboxes, low, high = _scene_args(planner, problems[0])
+    compiled, boxes, rboxes, pts, nrm, low, high = _scene_args(planner, problems[0])
     observer = planner.engine.observer  # type: ignore[attr-defined]
     nws = _workspace(observer.n_points, layout, 6)
     ows4 = RK._obs_scratch(len(compiled.rays[0]), len(rboxes[0]))
-    ows = (*ows4, np.empty((observer.n_points, 6), np.float32))
+    ows = (*ows4, np.empty((observer.n_points, 6), np.float32), np.empty(observer.n_points, np.int64))
     fparams = np.zeros(11)
     fparams[[RK.F_S0, RK.F_RANGE, RK.F_SPACING]] = 0.07, observer.max_range, observer.spacing
-    iparams = np.zeros(12, np.int64)
+    iparams = np.zeros(13, np.int64)
     iparams[RK.I_ACTION_DIM], iparams[RK.I_ROBOT] = 6, RK.BODY
     robot = SShape()
     for q in _free_configs(problems[0], 10, 5):
         goal = _free_configs(problems[0], 1, int(rng.integers(1000)))[0]
-        u = rng.random(compiled.blk)
+        u = rng.random(len(compiled.rays[0]) + observer.n_points)
         noise = rng.normal(size=6).astype(np.float32)
         for sampled in (False, True):
-            a = RK._act(q, goal, u, noise, sampled, compiled.rays, rboxes, low, high, fparams, iparams,
+            a = RK._act(q, goal, u, noise, sampled, compiled.rays, rboxes, pts, nrm, low, high, fparams, iparams,
                         compiled.scale, wflat, layout, ows, nws).copy()  # fmt: skip
             obs_in = ows[4].copy()
             goal_in = (robot.log(q, goal) / robot.action_scale).astype(np.float32)
@@ -329,3 +329,20 @@ def test_compiled_march_and_nearest_are_the_numpy_ones(problems: list[Problem]) 
         assert a.success == b.success and np.array_equal(a.path, b.path) and a.collision_checks == b.collision_checks
         shortened += a.success and len(a.path) < len(a.raw_path)
     assert shortened > 0
+
+
+def test_the_sshape_seeing_points_is_the_step_loop(problems: list[Problem], one_torch_thread: None) -> None:
+    """The S-shape's global policy (a subset of the scene's surface points), compiled,
+    against the one-robot step loop with the numpy network: escapes included."""
+    fast = make_planner("policy", SShape(), observation="global")
+    ref = make_planner("policy", SShape(), observation="global", compiled=False)
+    assert fast.engine.compiled_rays() is not None  # type: ignore[attr-defined]
+    same, escapes = 0, 0
+    for p in problems[:12]:
+        a, b = fast.plan(p), ref.plan(p)
+        assert "compiled" in a.info["time_split"] and "compiled" not in b.info["time_split"]
+        escapes += a.info["escapes"]
+        same += _same(a, b)
+        if a.success:
+            assert check_path(SShape(), p, a.path)
+    assert same >= 10 and escapes > 0

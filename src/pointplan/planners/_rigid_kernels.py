@@ -48,6 +48,7 @@ from ._policy_kernels import (
     _network,
     _q_free,
     _segment_hits,
+    _select,
     _workspace,
 )
 from ._policy_kernels import _edge_free as _ball_edge_free
@@ -86,9 +87,12 @@ END_AT_GOAL = 7
     I_SAMPLED,
     I_ROBOT,
     I_HANDOVER,
-) = range(12)
+    I_OBS,
+) = range(13)
 #: ``I_ROBOT``: a translating ball, or a free-flying body of boxes
 BALL, BODY = 0, 1
+#: ``I_OBS``: what the robot sees: rays (``local``), or a subset of the scene's points (``global``)
+RAYS, POINTS = 0, 1
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
@@ -256,6 +260,29 @@ def _observe(q, kind, u, rays, rboxes, low, high, max_range, spacing, s32, obs, 
 
 
 @_jit
+def _observe_points(q, kind, u, pts, nrm, s32, obs, idx, rot):  # type: ignore[no-untyped-def]
+    """The network's input for a point-set observation (``PointSetObserver.observe_one``)
+    of one robot from the draws ``u`` (``max(P, 1) + n``): the drawn subset of the scene's
+    points ``pts (P, 3)`` and normals, in the robot frame (``obs (n, 6)`` float32,
+    positions in steps; all zero for a scene without points)."""
+    count, n = pts.shape[0], obs.shape[0]
+    if count == 0:
+        for i in range(n):
+            for j in range(6):
+                obs[i, j] = 0.0
+        return
+    _select(u, count, n, idx)
+    _frame(kind, q, rot)
+    for i in range(n):
+        r = idx[i]
+        for a in range(3):
+            pb = rot[0, a] * (pts[r, 0] - q[0]) + rot[1, a] * (pts[r, 1] - q[1]) + rot[2, a] * (pts[r, 2] - q[2])
+            nb = rot[0, a] * nrm[r, 0] + rot[1, a] * nrm[r, 1] + rot[2, a] * nrm[r, 2]
+            obs[i, a] = np.float32(pb) / s32
+            obs[i, 3 + a] = np.float32(nb)
+
+
+@_jit
 def _obs_scratch(n_rays, n_boxes):  # type: ignore[no-untyped-def]
     """Scratch of :func:`_observe`: hits, kept rays, rotation, and the casting's rays and
     per-box rows."""
@@ -275,7 +302,9 @@ def _obs_scratch(n_rays, n_boxes):  # type: ignore[no-untyped-def]
 
 # ------------------------------------------------------------------ one step's action
 @_jit
-def _act(q, goal, u, noise, sampled, rays, rboxes, low, high, fparams, iparams, scale, wflat, layout, ows, nws):  # type: ignore[no-untyped-def]
+def _act(  # type: ignore[no-untyped-def]
+    q, goal, u, noise, sampled, rays, rboxes, pts, nrm, low, high, fparams, iparams, scale, wflat, layout, ows, nws
+):
     """The action (float32 ``(action_dim,)``, a view into ``nws``) at ``q`` toward ``goal``
     for the draws ``u``: the observation, the goal input ``log(q^-1 goal) / scale``
     (``(goal - q) / scale`` for a ball), the network."""
@@ -284,20 +313,11 @@ def _act(q, goal, u, noise, sampled, rays, rboxes, low, high, fparams, iparams, 
     vec = nws[4]
     width, features = layout[0], layout[1]
     obs = ows[4]
-    _observe(
-        q,
-        kind,
-        u,
-        rays,
-        rboxes,
-        low,
-        high,
-        fparams[F_RANGE],
-        fparams[F_SPACING],
-        np.float32(fparams[F_S0]),
-        obs,
-        ows[:4],
-    )
+    s32 = np.float32(fparams[F_S0])
+    if iparams[I_OBS] == POINTS:
+        _observe_points(q, kind, u, pts, nrm, s32, obs, ows[5], ows[2])
+    else:
+        _observe(q, kind, u, rays, rboxes, low, high, fparams[F_RANGE], fparams[F_SPACING], s32, obs, ows[:4])
     np.dot(obs, wflat[: features * width].reshape(features, width), h)
     b0 = wflat[features * width : features * width + width]
     for p in range(h.shape[0]):
@@ -378,10 +398,27 @@ def _finish(kind, end, path, t, goal, greedy, connect, resolution, low, high, ra
 
 @_jit
 def rollout_rigid(  # type: ignore[no-untyped-def]
-    q0, goal, low, high, boxes, rboxes, body, rays, wflat, layout, scale, fparams, iparams, stream, normals, path
+    q0,
+    goal,
+    low,
+    high,
+    boxes,
+    rboxes,
+    pts,
+    nrm,
+    body,
+    rays,
+    wflat,
+    layout,
+    scale,
+    fparams,
+    iparams,
+    stream,
+    normals,
+    path,
 ):
-    """One attempt of ``RolloutEngine.plan`` for a robot seeing rays (``I_ROBOT``: the
-    sphere or the S-shape), as the one-robot step loop makes it: at each configuration
+    """One attempt of ``RolloutEngine.plan`` for the sphere seeing rays or the S-shape
+    seeing rays or points (``I_ROBOT``, ``I_OBS``), as the one-robot step loop makes it: at each configuration
     (the start included), with ``I_GREEDY``, the certified edge to the goal (stop at the
     goal when free); the action for the step's draws (``stream``: ``R + n`` uniform
     numbers a step), sampled where the attempt is (``I_SAMPLED``, scaled by ``F_NOISE``)
@@ -396,7 +433,9 @@ def rollout_rigid(  # type: ignore[no-untyped-def]
     ``boxes``: the obstacle boxes ``(centres, rotations, half sides)``; ``rboxes``: the
     boxes rays hit (obstacles and wall slabs) and a validity flag each; ``body``:
     ``(centres, half sides, corner map)`` of the S-shape's boxes (unused for the ball,
-    whose radius is ``F_RADIUS``); ``rays``: body-frame ray origins and directions. Writes
+    whose radius is ``F_RADIUS``); ``rays``: body-frame ray origins and directions;
+    ``pts``, ``nrm``: the scene's points and normals where the robot sees a subset of
+    them (``I_OBS``: then ``max(P, 1) + n`` uniform numbers a step). Writes
     the path to ``path`` (``horizon + 2`` rows) and returns ``(end code, rows, checks,
     escapes)``."""
     kind, horizon, stall_steps = iparams[I_ROBOT], iparams[I_HORIZON], iparams[I_STALL_STEPS]
@@ -405,10 +444,10 @@ def rollout_rigid(  # type: ignore[no-untyped-def]
     substep, goal_tol, resolution = fparams[F_SUBSTEP], fparams[F_GOAL_TOL], fparams[F_RESOLUTION]
     n_points, adim, radius = iparams[I_N_POINTS], iparams[I_ACTION_DIM], fparams[F_RADIUS]
     nr = rays[0].shape[0]
-    blk = nr + n_points
+    blk = (max(pts.shape[0], 1) if iparams[I_OBS] == POINTS else nr) + n_points
     ws = _scratch(body[0].shape[0], boxes[0].shape[0])
     o4 = _obs_scratch(nr, rboxes[0].shape[0])
-    ows = (o4[0], o4[1], o4[2], o4[3], np.empty((n_points, 6), np.float32))
+    ows = (o4[0], o4[1], o4[2], o4[3], np.empty((n_points, 6), np.float32), np.empty(n_points, np.int64))
     nws = _workspace(n_points, layout, adim)
     noise = np.zeros(adim, np.float32)
     tw = np.empty(adim)
@@ -433,7 +472,26 @@ def rollout_rigid(  # type: ignore[no-untyped-def]
                 noise[i] = np.float32(sd * normals[drawn, i])
             drawn += 1
         u = stream[t * blk : (t + 1) * blk]
-        a = _act(q, goal, u, noise, noisy, rays, rboxes, low, high, fparams, iparams, scale, wflat, layout, ows, nws)
+        a = _act(
+            q,
+            goal,
+            u,
+            noise,
+            noisy,
+            rays,
+            rboxes,
+            pts,
+            nrm,
+            low,
+            high,
+            fparams,
+            iparams,
+            scale,
+            wflat,
+            layout,
+            ows,
+            nws,
+        )
         if escaping:
             left -= 1
         for i in range(adim):

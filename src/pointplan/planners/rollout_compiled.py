@@ -222,21 +222,22 @@ def _boxes_only(scene: Scene) -> bool:
 
 class CompiledRays:
     """The compiled rollout of an engine whose robot is the sphere or a free-flying body of
-    boxes (the S-shape) and whose observer casts rays
-    (:class:`~pointplan.observers.rays.LocalRays`): one call per attempt, in scenes of
-    boxes, the same rollout as the one-robot step loop's. The mean action with its escape,
+    boxes (the S-shape) seeing rays (:class:`~pointplan.observers.rays.LocalRays`), or the
+    S-shape seeing a subset of the scene's points (``global``): one call per attempt, in
+    scenes of boxes, the same rollout as the one-robot step loop's. The mean action with its escape,
     or a sampled attempt; an escape toward a subgoal (the sphere's) is left to the step
     loop, which goes on from where it starts. Made by :meth:`build`."""
 
     def __init__(
-        self, engine: EngineView, kind: int, body: tuple[np.ndarray, ...], rays: tuple[np.ndarray, ...]
+        self, engine: EngineView, kind: int, body: tuple[np.ndarray, ...], rays: tuple[np.ndarray, ...] | None
     ) -> None:
         self.engine = engine
-        fast, robot, observer = engine.fast, engine.robot, engine.observer
-        self.kind, self.body, self.rays = kind, body, rays
+        fast, robot = engine.fast, engine.robot
+        self.kind, self.body = kind, body
+        self.sees = RK.RAYS if rays is not None else RK.POINTS
+        self.rays = rays if rays is not None else (np.zeros((0, 3)), np.zeros((0, 3)))
         self.weights = K.pack_weights(fast.inp, fast.hidden, fast.head)
         self.scale = np.ascontiguousarray(robot.action_scale, np.float64)
-        self.blk = len(rays[0]) + int(observer.n_points)
         self._scene: Scene | None = None
         self._scene_args: tuple[Any, ...] | None = None
 
@@ -245,8 +246,10 @@ class CompiledRays:
         """The compiled rollout of ``engine``, or ``None`` where it does not apply (another
         robot or observer, a network of another shape)."""
         fast, robot, observer = engine.fast, engine.robot, engine.observer
-        if fast is None or type(observer) not in (LocalRays, WideRays):
-            return None
+        rays = type(observer) in (LocalRays, WideRays)
+        points = bool(getattr(observer, "compiled_points", False)) and getattr(observer, "with_normals", False)
+        if fast is None or not (rays or (points and not isinstance(robot, Sphere3D))):
+            return None  # (the sphere seeing points has CompiledBall)
         f = np.ascontiguousarray
         parts = robot.parts
         if isinstance(robot, Sphere3D):
@@ -265,12 +268,15 @@ class CompiledRays:
             return None
         width, adim = fast.inp[0].shape[1], robot.twist_dim
         if (
-            fast.inp[0].shape[0] != 6
-            or any(w.shape != (width, width) for w, _ in fast.hidden)
+            any(w.shape != (width, width) for w, _ in fast.hidden)
             or fast.head[0][0].shape[0] != width + adim
             or fast.action_dim != adim
         ):
             return None
+        if fast.inp[0].shape[0] != 6 or robot.dim != 3:
+            return None
+        if not rays:
+            return cls(engine, kind, body, None)
         return cls(engine, kind, body, (f(observer.body_origins, np.float64), f(observer.body_dirs, np.float64)))
 
     @staticmethod
@@ -284,11 +290,23 @@ class CompiledRays:
         if not _boxes_only(scene):
             return None
         f = np.ascontiguousarray
-        world = scene.world
-        rw = self.engine.observer.ray_world(scene)
+        world, observer = scene.world, self.engine.observer
         boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
-        rboxes = (f(rw.box_c, np.float64), f(rw.box_r, np.float64), f(rw.box_h, np.float64), np.any(rw.box_h > 0, -1))
-        return boxes, rboxes, f(scene.low, np.float64), f(scene.high, np.float64)
+        empty = np.zeros((0, 3))
+        if self.sees == RK.POINTS:
+            observer.set_scene(0, scene)
+            pts, nrm = (f(a, np.float64) for a in observer.points_one())
+            rboxes = (empty, np.zeros((0, 3, 3)), empty, np.zeros(0, bool))
+        else:
+            rw = observer.ray_world(scene)
+            pts, nrm = empty, empty
+            rboxes = (
+                f(rw.box_c, np.float64),
+                f(rw.box_r, np.float64),
+                f(rw.box_h, np.float64),
+                np.any(rw.box_h > 0, -1),
+            )
+        return boxes, rboxes, pts, nrm, f(scene.low, np.float64), f(scene.high, np.float64)
 
     def _params(self, sampled: bool) -> tuple[np.ndarray, np.ndarray]:
         """The kernel's ``fparams`` and ``iparams`` for an attempt."""
@@ -306,11 +324,11 @@ class CompiledRays:
             esc.still,
             esc.noise,
             opts.action_noise if sampled else 0.0,
-            observer.max_range,
+            getattr(observer, "max_range", 0.0),  # (rays only)
             observer.spacing,
             float(getattr(eng.robot, "radius", 0.0)),
         )
-        iparams = np.zeros(12, np.int64)
+        iparams = np.zeros(13, np.int64)
         iparams[:] = (
             eng.horizon,
             int(opts.stall_steps or 0),
@@ -324,6 +342,7 @@ class CompiledRays:
             int(sampled),
             self.kind,
             int(esc.on and esc.subgoal),  # an escape toward a subgoal: the step loop's
+            self.sees,
         )
         return fparams, iparams
 
@@ -344,7 +363,7 @@ class CompiledRays:
             self._scene = scene
         if self._scene_args is None:
             return None, None, None
-        boxes, rboxes, low, high = self._scene_args
+        boxes, rboxes, pts, nrm, low, high = self._scene_args
         eng = self.engine
         horizon, adim = eng.horizon, eng.robot.twist_dim
         # the sampled steps' normal draws, in the order the step loop takes them
@@ -353,11 +372,12 @@ class CompiledRays:
         fparams, iparams = self._params(sampled)
         start, goal = (np.ascontiguousarray(x, np.float64) for x in (problem.start, problem.goal))
         path = np.empty((horizon + 2, eng.robot.config_dim))
-        stream = eng._uniforms(horizon * self.blk)
+        blk = (max(len(pts), 1) if self.sees == RK.POINTS else len(self.rays[0])) + int(eng.observer.n_points)
+        stream = eng._uniforms(horizon * blk)
         t1 = time.perf_counter()
         end, rows, checks, escapes = RK.rollout_rigid(
-            start, goal, low, high, boxes, rboxes, self.body, self.rays, *self.weights, self.scale, fparams, iparams,
-            stream, normals, path,
+            start, goal, low, high, boxes, rboxes, pts, nrm, self.body, self.rays, *self.weights, self.scale, fparams,
+            iparams, stream, normals, path,
         )  # fmt: skip
         t2 = time.perf_counter()
         if end == K.END_ESCAPE:
