@@ -282,3 +282,20 @@ def test_command_line_plans_evaluates_and_draws_an_arm(tmp_path: Path, capsys: p
     assert png.stat().st_size > 10_000 and gif.stat().st_size > 10_000
     assert main(["eval", "--env", "mbm-box", "--robot", "sshape", "--episodes", "1"]) == 2
     assert "ship for the arms panda, ur5" in capsys.readouterr().err
+
+
+def test_shortcut_probes_keep_the_paths() -> None:
+    """Bi-RRT probes a shortcut's stretch with a few plain configurations before its
+    certified check: the same paths as without (a certified stretch has no colliding
+    configuration), with fewer configurations checked where shortcuts hit obstacles."""
+    from pointplan.planners.birrt import BiRRT
+
+    robot = make_arm("panda")
+    fewer = 0
+    for i in (3, 4):
+        p = load_problem("panda", "bookshelf_tall", i)
+        a = BiRRT(robot, step=0.5, resolution=0.05).plan(p)
+        b = BiRRT(robot, step=0.5, resolution=0.05, shortcut_probes=0).plan(p)
+        assert a.success and np.array_equal(a.path, b.path)
+        fewer += a.collision_checks < b.collision_checks
+    assert fewer > 0
