@@ -233,6 +233,17 @@ def _thin(hits, spacing, kept):  # type: ignore[no-untyped-def]
 
 
 @_jit
+def _seen(obs, i, point, rot, q, s32):  # type: ignore[no-untyped-def]
+    """Row ``i`` of the network's input: the world point and normal ``point[:6]`` in the
+    robot's frame (``rot``, position ``q[:3]``), the position in steps (``/ s32``)."""
+    for a in range(3):
+        pb = rot[0, a] * (point[0] - q[0]) + rot[1, a] * (point[1] - q[1]) + rot[2, a] * (point[2] - q[2])
+        nb = rot[0, a] * point[3] + rot[1, a] * point[4] + rot[2, a] * point[5]
+        obs[i, a] = np.float32(pb) / s32
+        obs[i, 3 + a] = np.float32(nb)
+
+
+@_jit
 def _observe(q, kind, u, rays, rboxes, low, high, max_range, spacing, s32, obs, ows):  # type: ignore[no-untyped-def]
     """The network's input for ``LocalRays.observe`` of one robot from the draws ``u`` (``R
     + n`` uniform numbers: the subset's keys, then the duplicates' draws): ``obs (n, 6)``
@@ -250,12 +261,7 @@ def _observe(q, kind, u, rays, rboxes, low, high, max_range, spacing, s32, obs, 
     rank = np.argsort(u[:count])
     for i in range(n):
         pos = rank[i] if i < count else int(u[nr + i] * count)
-        r = kept[pos]
-        for a in range(3):
-            pb = rot[0, a] * (hits[r, 0] - q[0]) + rot[1, a] * (hits[r, 1] - q[1]) + rot[2, a] * (hits[r, 2] - q[2])
-            nb = rot[0, a] * hits[r, 3] + rot[1, a] * hits[r, 4] + rot[2, a] * hits[r, 5]
-            obs[i, a] = np.float32(pb) / s32
-            obs[i, 3 + a] = np.float32(nb)
+        _seen(obs, i, hits[kept[pos]], rot, q, s32)
     return count
 
 
@@ -273,13 +279,12 @@ def _observe_points(q, kind, u, pts, nrm, s32, obs, idx, rot):  # type: ignore[n
         return
     _select(u, count, n, idx)
     _frame(kind, q, rot)
+    row = np.empty(6)
     for i in range(n):
         r = idx[i]
         for a in range(3):
-            pb = rot[0, a] * (pts[r, 0] - q[0]) + rot[1, a] * (pts[r, 1] - q[1]) + rot[2, a] * (pts[r, 2] - q[2])
-            nb = rot[0, a] * nrm[r, 0] + rot[1, a] * nrm[r, 1] + rot[2, a] * nrm[r, 2]
-            obs[i, a] = np.float32(pb) / s32
-            obs[i, 3 + a] = np.float32(nb)
+            row[a], row[3 + a] = pts[r, a], nrm[r, a]
+        _seen(obs, i, row, rot, q, s32)
 
 
 @_jit

@@ -18,6 +18,7 @@ import numpy as np
 
 from ._ball_kernels import _motion
 from ._body_kernels import _check_motion, _integrate, _log, _scratch
+from ._body_kernels import _norm as _length
 
 _GRID_SLACK = 1e-9
 
@@ -41,14 +42,6 @@ def _geo_log(kind, a, b, out):  # type: ignore[no-untyped-def]
             out[i] = b[i] - a[i]
     else:
         _log(a, b, out)
-
-
-@_jit
-def _length(v):  # type: ignore[no-untyped-def]
-    s = 0.0
-    for i in range(v.shape[0]):
-        s += v[i] * v[i]
-    return math.sqrt(s)
 
 
 @_jit
