@@ -13,7 +13,9 @@ moving scene, where a rollout cannot start over. With ``--escape K`` a rollout t
 steps of the robot's escape wherever it is stuck (``pointplan eval --escape``): sampled
 actions for the S-shape (cells ``policy-local-escK``), steps toward a random subgoal for
 the sphere (cells ``policy-local-subK``), in every scene. Without it the policies plan
-with the mean action throughout, whatever the planner's default for the robot.
+with the mean action throughout, whatever the planner's default for the robot. Other
+planner names (``birrt``, ``hybrid``: the robot's default policy, then Bi-RRT, 10 s a
+query) are built by ``make_planner`` with their defaults.
 """
 
 from __future__ import annotations
@@ -107,7 +109,7 @@ def table(robot: str) -> str:
 
     base = ("policy-global", "policy-local")
     tried = sorted({p.stem.split("_", 2)[2] for p in OUT.glob(f"{robot}_*_policy-*.json")} - set(base), key=order)
-    for planner in (*base, *tried, "birrt"):
+    for planner in (*base, *tried, "hybrid", "birrt"):
         for scene in TABLE_SCENES:
             p = cell_path(robot, scene, planner)
             if not p.exists():
