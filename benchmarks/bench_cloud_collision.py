@@ -4,18 +4,26 @@ A 3D-Boxes workspace is replaced by a cloud of points sampled on its boxes' surf
 (area-weighted, with normals), as a user's scan would give it. For the S-shape (boxes as
 bodies) this times:
 
-- ``check``: one ``robot.collides`` call on a batch of configurations, through the k-d
-  tree (:func:`pointplan.geometry.collision.boxes_contain_cloud_points`) against the
-  brute-force test of every cloud point (a sphere of the cloud's point radius) against
-  every body box (the reference: the same answers are asserted);
+- ``check``: one ``robot.collides`` call on a batch of configurations, through the
+  compiled grid of the cloud (``SShape.collides``: :mod:`pointplan.robots._cloud_kernels`)
+  and through the k-d tree (:func:`pointplan.geometry.collision.boxes_contain_cloud_points`,
+  the numpy path), against the brute-force test of every cloud point (a sphere of the
+  cloud's point radius) against every body box (the reference: the same answers are
+  asserted);
 - ``plan``: ``PolicyPlanner.plan`` (the shipped S-shape policy, ``global`` observation)
-  on a few problems in the cloud scene, with the k-d tree, for the whole query time;
+  on a few problems (their starts and goals) in the first problem's scene given as the
+  cloud, with the compiled checks (and, with ``--kdtree``, through the k-d tree), and in
+  the same scene given as its boxes, for the whole query time (after one query to warm
+  up), and that time over the configurations checked (the rollouts in a cloud and among
+  the boxes differ: the cloud's points are spheres, and only scenes of boxes have the
+  compiled rollout, so the step loop plans in the cloud);
 - ``--success``: the shipped S-shape policies (``local`` and ``global``) on each problem
   given as boxes and as a fresh cloud of its boxes' surfaces; a cloud path counts only if
   the evaluator finds it free of the true boxes (it shows whether a path slips between
   the points).
 
     python benchmarks/bench_cloud_collision.py --points 15000 --problems 5
+    python benchmarks/bench_cloud_collision.py --points 100000 --problems 5 --kdtree
     python benchmarks/bench_cloud_collision.py --points 15000 --problems 20 --success
 """
 
@@ -23,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import Any
 
 import numpy as np
 
@@ -33,6 +42,7 @@ def main() -> None:
     ap.add_argument("--configs", type=int, default=200, help="configurations per collision call (default: %(default)s)")
     ap.add_argument("--problems", type=int, default=5, help="problems planned (default: %(default)s)")
     ap.add_argument("--seed", type=int, default=2026)
+    ap.add_argument("--kdtree", action="store_true", help="also plan through the k-d tree (the numpy checks; slow)")
     ap.add_argument("--success", action="store_true", help="compare success on boxes and on clouds instead of timing")
     args = ap.parse_args()
     if args.success:
@@ -42,9 +52,9 @@ def main() -> None:
     from pointplan.geometry.collision import sphere_box_sqdist
     from pointplan.geometry.sampling import area_weighted_points
     from pointplan.geometry.shapes import PointCloud
-    from pointplan.planners import make_planner
+    from pointplan.robots.base import Robot
     from pointplan.scenes.scenarios import make_scenario
-    from pointplan.scenes.scene import Problem, Scene
+    from pointplan.scenes.scene import Scene
 
     sc = make_scenario("boxes3d", robot="sshape")
     robot = sc.robot
@@ -55,8 +65,12 @@ def main() -> None:
     cloud = Scene([PointCloud(pts, nrm)], base.low, base.high, name="cloud")
     q = robot.sample_uniform(rng, args.configs, base.low, base.high)
 
+    robot.collides(cloud.world, q[:2])  # compiles the kernels, builds the grid
     t = time.perf_counter()
     fast = robot.collides(cloud.world, q)
+    t_grid = time.perf_counter() - t
+    t = time.perf_counter()
+    tree = Robot.collides(robot, cloud.world, q)
     t_tree = time.perf_counter() - t
     _, c, rot, h = robot.world_parts(q)  # the body boxes (the S-shape has no sphere parts)
     assert not len(robot.parts.sphere_radii)
@@ -65,18 +79,50 @@ def main() -> None:
     ref = np.any(sphere_box_sqdist(pts, c.reshape(-1, 3), rot.reshape(-1, 3, 3), h.reshape(-1, 3)) <= r * r, 0)
     t_brute = time.perf_counter() - t
     ref = ref.reshape(c.shape[:-1]).any(-1)
-    assert np.array_equal(ref, fast), "the k-d tree and the brute force disagree"
+    assert np.array_equal(ref, tree), "the k-d tree and the brute force disagree"
+    assert np.array_equal(ref, fast), "the compiled grid and the brute force disagree"
     print(f"{args.points} cloud points, {args.configs} S-shape configurations ({int(fast.sum())} in collision):")
-    print(f"  k-d tree {1e3 * t_tree:.1f} ms, brute force {1e3 * t_brute:.1f} ms, ratio {t_brute / t_tree:.0f}x")
+    print(
+        f"  check: compiled grid {1e3 * t_grid:.2f} ms, k-d tree {1e3 * t_tree:.1f} ms, "
+        f"brute force {1e3 * t_brute:.1f} ms"
+    )
+    print(f"  plan(): {_plan(robot, cloud, problems)} (cloud, compiled grid)")
+    if args.kdtree:
+        print(f"  plan(): {_plan(_kdtree_robot(), cloud, problems)} (cloud, k-d tree)")
+    print(f"  plan(): {_plan(robot, base, problems)} (the same scene as boxes)")
+
+
+def _plan(robot: Any, scene: Any, problems: list[Any]) -> str:
+    """The shipped policy (``global``) on the problems' starts and goals in ``scene``: solved
+    and the median query time, after one query to warm up."""
+    from pointplan.planners import make_planner
+    from pointplan.scenes.scene import Problem
 
     planner = make_planner("policy", robot, observation="global")
-    times, ok = [], 0
+    planner.plan(Problem(scene, problems[0].start, problems[0].goal))
+    times, ok, checks = [], 0, 0
     for p in problems:
         t = time.perf_counter()
-        res = planner.plan(Problem(cloud, p.start, p.goal))
+        res = planner.plan(Problem(scene, p.start, p.goal))
         times.append(time.perf_counter() - t)
         ok += res.success
-    print(f"  plan(): {ok}/{len(problems)} solved, median {1e3 * float(np.median(times)):.0f} ms per query")
+        checks += res.collision_checks
+    per = 1e6 * sum(times) / max(checks, 1)
+    return (
+        f"{ok}/{len(problems)} solved, median {1e3 * float(np.median(times)):.1f} ms per query "
+        f"({per:.2f} us per configuration checked)"
+    )
+
+
+def _kdtree_robot() -> Any:
+    """The S-shape whose checks against clouds go through the k-d tree (numpy)."""
+    from pointplan.robots.sshape import SShape
+
+    class KdTreeSShape(SShape):
+        def _obstacles(self, world: Any) -> tuple[Any, ...] | None:
+            return super()._obstacles(world) if world.boxes_only else None
+
+    return KdTreeSShape()
 
 
 def success(n_points: int, n_problems: int, seed: int) -> None:

@@ -29,6 +29,8 @@ Array = NDArray[np.float64]
 Bool = NDArray[np.bool_]
 
 _FAR = 1e6
+#: a point cloud sorted into a grid (:func:`cloud_grid_arrays`)
+CloudGrid = tuple[Array, NDArray[np.int64], Array, NDArray[np.int64], Array, NDArray[np.int64]]
 
 
 # ---------------------------------------------------------------------------- kernels
@@ -192,6 +194,32 @@ class CollisionWorld:
             and not any(self.coal_items)
             and not any(self.meshes)
         )
+
+    @property
+    def boxes_and_clouds_only(self) -> bool:
+        """Are all the obstacles boxes or point clouds (no spheres, capsules, cylinders,
+        cones or meshes, in any scene)? The S-shape's compiled checks take such a
+        single-scene world (the cloud through :meth:`cloud_grid`)."""
+        others = (self.sph_c, self.cap_a, self.cyl_c, self.con_c)
+        return all(a.shape[-2] == 0 for a in others) and not any(self.coal_items) and not any(self.meshes)
+
+    def cloud_grid(self, cell: float) -> CloudGrid | None:
+        """The single scene's cloud sorted into a uniform grid of cubes of side about
+        ``cell`` (:func:`cloud_grid_arrays`), as the compiled checks read it; ``None``
+        where the scene has no cloud points. Built once per world and cell size (kept in
+        the world's ``__dict__``: another world, a stacked one or a later scene's, builds
+        its own)."""
+        if self.batch_shape != ():
+            raise ValueError("cloud_grid takes a single-scene world")
+        cache = self.__dict__.setdefault("_cloud_grids", {})
+        key = float(cell)
+        if key not in cache:
+            tree = self.cloud_trees[0] if self.cloud_trees else None
+            cache[key] = (
+                None if tree is None or not tree.n else cloud_grid_arrays(tree.data, key, self._cloud_margin(0))
+            )
+        grid: CloudGrid | None = cache[key]
+        return grid
 
     # ------------------------------------------------------------------ build
     @classmethod
@@ -480,6 +508,46 @@ def _sub_boxes(c: Array, rot: Array, h: Array, cap: int = 512) -> tuple[Array, A
     centres = c[owner] + np.einsum("pij,pj->pi", rot[owner], local)
     radius = np.sqrt(np.sum((h / counts) ** 2, -1))[owner]
     return centres, radius, owner
+
+
+#: at most this many cells in a cloud's grid (:func:`cloud_grid_arrays` widens its cells to fit)
+_MAX_GRID_CELLS = 1 << 22
+
+
+def cloud_grid_arrays(points: Array, cell: float, margin: float) -> CloudGrid:
+    """A 3D cloud ``points (N, 3)`` (each point a sphere of radius ``margin``) sorted into a
+    uniform grid of cubes of side ``cell`` (widened until the grid has at most
+    :data:`_MAX_GRID_CELLS` cells) over its bounding box, compressed-row style: ``(points
+    sorted by cell (N, 3), starts (C + 1,), origin (3,), cells per axis n (3,), params,
+    prefix sums)``: cell ``(i, j, k)`` is row ``(i * n1 + j) * n2 + k`` and holds
+    ``points[starts[row] : starts[row + 1]]``; a point ``p`` is in the cells ``floor((p -
+    origin) * params[0])`` (the formula the kernels use to find the cells a box's bounding
+    box covers); ``params``: ``1 / cell``, ``cell``, ``margin``, and a slack for round-off
+    at the cloud's scale; the prefix sums ``((n0 + 1) * (n1 + 1) * (n2 + 1),)``: the points
+    in the cells below each ``(i, j, k)`` (a block's count in eight reads)."""
+    p = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
+    if not len(p) or not np.all(np.isfinite(p)):
+        raise ValueError("a cloud grid takes a non-empty cloud of finite points")
+    cell = float(cell)
+    if not (np.isfinite(cell) and cell > 0):
+        raise ValueError(f"the cell size must be a positive number, not {cell}")
+    origin = p.min(0)
+    extent = p.max(0) - origin
+    while np.prod(np.floor(extent / cell) + 2.0) > _MAX_GRID_CELLS:
+        cell *= 1.5
+    inv = 1.0 / cell
+    key3 = np.floor((p - origin) * inv).astype(np.int64)
+    dims = key3.max(0) + 1
+    key = (key3[:, 0] * dims[1] + key3[:, 1]) * dims[2] + key3[:, 2]
+    order = np.argsort(key, kind="stable")
+    counts = np.bincount(key, minlength=int(np.prod(dims)))
+    starts = np.zeros(len(counts) + 1, np.int64)
+    np.cumsum(counts, out=starts[1:])
+    cum = np.zeros(tuple(dims + 1), np.int64)
+    cum[1:, 1:, 1:] = counts.reshape(tuple(dims)).cumsum(0).cumsum(1).cumsum(2)
+    scale = float(np.max(np.abs(p))) + float(np.max(extent)) + cell
+    params = np.array([inv, cell, float(margin), 1e-9 * scale])
+    return np.ascontiguousarray(p[order]), starts, np.ascontiguousarray(origin), dims, params, cum.reshape(-1)
 
 
 def boxes_contain_cloud_points(tree: cKDTree, c: Array, rot: Array, h: Array, margin: float = 0.0) -> Bool:

@@ -279,19 +279,18 @@ class CompiledRays:
             return cls(engine, kind, body, None)
         return cls(engine, kind, body, (f(observer.body_origins, np.float64), f(observer.body_dirs, np.float64)))
 
-    @staticmethod
-    def applies(scene: Scene) -> bool:
-        """Does the compiled rollout plan in ``scene`` (static, boxes only)?"""
-        return _boxes_only(scene)
-
     def _scene_inputs(self, scene: Scene) -> tuple[Any, ...] | None:
-        """The obstacle boxes and the boxes rays hit (with the wall slabs) of ``scene``, or
-        ``None`` where it has obstacles other than boxes."""
-        if not _boxes_only(scene):
+        """The obstacles of ``scene`` as the kernel takes them (its boxes; for the S-shape
+        seeing points, also a point cloud's grid), the boxes rays hit (with the wall slabs)
+        or the points the robot sees; ``None`` where the scene has other obstacles."""
+        world, observer = scene.world, self.engine.observer
+        clouds = self.sees == RK.POINTS and self.kind == RK.BODY and not scene.dynamic
+        if not (_boxes_only(scene) or (clouds and world.batch_shape == () and world.boxes_and_clouds_only)):
             return None
         f = np.ascontiguousarray
-        world, observer = scene.world, self.engine.observer
         boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        if clouds:
+            boxes = self.engine.robot._obstacles(world)  # type: ignore[attr-defined]  # (boxes and the cloud grid)
         empty = np.zeros((0, 3))
         if self.sees == RK.POINTS:
             observer.set_scene(0, scene)

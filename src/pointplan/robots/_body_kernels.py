@@ -6,9 +6,13 @@ obstacle boxes: the body's boxes at a pose, grown for a motion as
 check of :func:`pointplan.robots.motion.check_motions` (grown samples, the start fallback,
 the bounds) for one motion (:func:`_check_motion`, which stops at the first sample that
 decides it: the answer and the count of configurations are those of the numpy check, which
-computes every sample) or a batch (:func:`check_motions_boxes`). ``SShape.check_motions``
-takes them in scenes of boxes; ``tests/test_rigid_kernels.py`` compares them with the numpy
-check (``NumpySShape``).
+computes every sample) or a batch (:func:`check_motions_boxes`). The obstacles are boxes
+``(centres, rotations, half sides)``, or those and a point cloud's grid (``(..., grid)``,
+:mod:`._cloud_kernels`; :func:`check_motions_cloud`): the same kernels test both.
+``SShape.check_motions`` (and ``collides``, ``march_compiled``, ``shortcut_compiled``)
+takes them in scenes of boxes and in one scene of boxes and a cloud;
+``tests/test_rigid_kernels.py`` and ``tests/test_cloud_kernels.py`` compare them with the
+numpy check (``NumpySShape``).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import numpy as np
 
 from ..geometry._kernels import _obb_row
 from ..geometry._se3_kernels import _pose_integrate_flat, _pose_log_flat
+from ._cloud_kernels import _cloud_hits
 
 #: as in pointplan.robots.motion (literals for the compiler)
 _CONTACT_MARGIN = 1e-5
@@ -97,13 +102,16 @@ def _grow(seg, reach, halfs0, cv, out):  # type: ignore[no-untyped-def]
 
 @_jit
 def _body_hits(q, halfs, body, boxes, ws):  # type: ignore[no-untyped-def]
-    """Does the body at ``q`` with box half sides ``halfs (P, 3)`` overlap an obstacle box?
+    """Does the body at ``q`` with box half sides ``halfs (P, 3)`` overlap an obstacle?
     ``body``: ``(centres (P, 3), half sides, corner map)``, the boxes axis-aligned in the
-    body frame; ``boxes``: ``(centres, rotations, half sides)``; ``ws``: :func:`_scratch`."""
+    body frame; ``boxes``: the obstacle boxes ``(centres, rotations, half sides)``, or
+    those and a point cloud's grid (:mod:`._cloud_kernels`: a point, a sphere of the
+    cloud's point radius, touching a body box is a hit, as in
+    ``CollisionWorld.boxes_collide``); ``ws``: :func:`_scratch`."""
     c0 = body[0]
-    box_c, box_r, box_h = boxes
+    box_c, box_r, box_h = boxes[0], boxes[1], boxes[2]
     rot, bc, br, row, rel, absr, t = ws[0], ws[1], ws[2], ws[3], ws[4], ws[5], ws[6]
-    if box_c.shape[0] == 0:
+    if box_c.shape[0] == 0 and len(boxes) == 3:
         return False
     _rotation(q, rot)
     for p in range(c0.shape[0]):
@@ -111,10 +119,20 @@ def _body_hits(q, halfs, body, boxes, ws):  # type: ignore[no-untyped-def]
             bc[p, a] = rot[a, 0] * c0[p, 0] + rot[a, 1] * c0[p, 1] + rot[a, 2] * c0[p, 2] + q[a]
             for b in range(3):
                 br[p, a, b] = rot[a, b]
-    for p in range(c0.shape[0]):  # noqa: SIM110 (a loop, not any() of a generator, for the compiler)
-        if _obb_row(bc, br, halfs, p, box_c, box_r, box_h, row, True, rel, absr, t):
-            return True
-    return False
+    if box_c.shape[0]:
+        for p in range(c0.shape[0]):
+            if _obb_row(bc, br, halfs, p, box_c, box_r, box_h, row, True, rel, absr, t):
+                return True
+    return _cloud_hits(boxes, bc, br, halfs)
+
+
+@_jit
+def bodies_hit(q, halfs, body, boxes, out):  # type: ignore[no-untyped-def]
+    """:func:`_body_hits` of the poses ``q (M, 7)`` with box half sides ``halfs (M, P, 3)``
+    into ``out (M,)`` (``Robot.collides``)."""
+    ws = _scratch(body[0].shape[0], boxes[0].shape[0])
+    for i in range(q.shape[0]):
+        out[i] = _body_hits(q[i], halfs[i], body, boxes, ws)
 
 
 @_jit
@@ -225,16 +243,30 @@ def check_motions_boxes(q0, tw, n, fallback, low, high, body, box_c, box_r, box_
     K, ...)``) or of scene ``i`` for motion ``i`` (``stacked``). Writes every sample
     ``configs (N, J, 7)`` (past a motion's own ``n`` its end, as the numpy check lays
     them out) and ``out (N, 3)``: certified sub-steps, collided (0 or 1), checks."""
-    nm, nj = configs.shape[0], configs.shape[1]
     ws = _scratch(body[0].shape[0], box_c.shape[1])
     last = np.empty(7)
-    for i in range(nm):
+    for i in range(configs.shape[0]):
         s = i if stacked else 0
-        boxes = (box_c[s], box_r[s], box_h[s])
-        k, hit, c = _check_motion(q0[i], tw[i], n[i], fallback[i], low[i], high[i], body, boxes, ws, last)
-        out[i, 0], out[i, 1], out[i, 2] = k, hit, c
-        for j in range(nj):
-            _integrate(q0[i], tw[i], min(j / n[i], 1.0), configs[i, j], ws[10])
+        _check_one(i, q0, tw, n, fallback, low, high, body, (box_c[s], box_r[s], box_h[s]), ws, last, configs, out)
+
+
+@_jit
+def check_motions_cloud(q0, tw, n, fallback, low, high, body, obstacles, configs, out):  # type: ignore[no-untyped-def]
+    """:func:`check_motions_boxes` in one scene whose obstacles are boxes and a point
+    cloud: ``obstacles`` = ``(centres, rotations, half sides, grid)`` (:func:`_body_hits`)."""
+    ws = _scratch(body[0].shape[0], obstacles[0].shape[0])
+    last = np.empty(7)
+    for i in range(configs.shape[0]):
+        _check_one(i, q0, tw, n, fallback, low, high, body, obstacles, ws, last, configs, out)
+
+
+@_jit
+def _check_one(i, q0, tw, n, fallback, low, high, body, boxes, ws, last, configs, out):  # type: ignore[no-untyped-def]
+    """Motion ``i`` of :func:`check_motions_boxes`: its row of ``out`` and its samples."""
+    k, hit, c = _check_motion(q0[i], tw[i], n[i], fallback[i], low[i], high[i], body, boxes, ws, last)
+    out[i, 0], out[i, 1], out[i, 2] = k, hit, c
+    for j in range(configs.shape[1]):
+        _integrate(q0[i], tw[i], min(j / n[i], 1.0), configs[i, j], ws[10])
 
 
 _GRID_SLACK = 1e-9

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -71,6 +72,9 @@ class SShape(Robot):
     body frame, scaled by 0.07 per translation axis and 0.2 rad per rotation axis."""
 
     name = "sshape"
+    #: the side of the cells a point cloud is sorted into for the compiled checks
+    #: (:meth:`CollisionWorld.cloud_grid`): about the bars' thickness
+    cloud_cell = BAR_THICKNESS
     dim = 3
     config_dim = 7
     twist_dim = 6
@@ -126,15 +130,15 @@ class SShape(Robot):
         high: Array | None = None,
         fallback: Bool | None = None,
     ) -> MotionCheck:
-        """:meth:`Robot.check_motions`, compiled where every obstacle is a box
-        (:func:`pointplan.robots._body_kernels.check_motions_boxes`: the same answers,
-        counts and samples); otherwise the numpy check."""
-        if not world.boxes_only:
-            return super().check_motions(world, q0, twist, n, low, high, fallback)
+        """:meth:`Robot.check_motions`, compiled where every obstacle is a box, or in one
+        scene of boxes and a point cloud (:func:`pointplan.robots._body_kernels.check_motions_boxes`,
+        ``check_motions_cloud``: the same answers, counts and samples); otherwise the numpy
+        check."""
         q0 = np.asarray(q0, np.float64)
         lead = q0.shape[:-1]
         stacked = world.batch_shape != ()
-        if stacked and lead != world.batch_shape:
+        obstacles = None if stacked else self._obstacles(world)
+        if (not stacked and obstacles is None) or (stacked and (not world.boxes_only or lead != world.batch_shape)):
             return super().check_motions(world, q0, twist, n, low, high, fallback)
         f = np.ascontiguousarray
         m = math.prod(lead)
@@ -146,21 +150,42 @@ class SShape(Robot):
             low, high = np.full(3, -1e300), np.full(3, 1e300)
         lo = f(np.broadcast_to(np.asarray(low, np.float64), lead + (3,)).reshape(m, 3))
         hi = f(np.broadcast_to(np.asarray(high, np.float64), lead + (3,)).reshape(m, 3))
-        boxes = [f(a, np.float64) for a in (world.box_c, world.box_r, world.box_h)]
-        if not stacked:
-            boxes = [b[None] for b in boxes]
         configs = np.empty((m, int(nf.max()) + 1 if m else 2, 7))
         out = np.empty((m, 3), np.int64)
-        bc, br, bh = boxes
-        _body_kernels.check_motions_boxes(
-            qf, tf, nf, fb, lo, hi, self._body_arrays(), bc, br, bh, stacked, configs, out
-        )
+        if obstacles is not None and len(obstacles) == 4:
+            _body_kernels.check_motions_cloud(qf, tf, nf, fb, lo, hi, self._body_arrays(), obstacles, configs, out)
+        else:
+            boxes = [f(a, np.float64) for a in (world.box_c, world.box_r, world.box_h)]
+            bc, br, bh = boxes if stacked else [b[None] for b in boxes]
+            _body_kernels.check_motions_boxes(
+                qf, tf, nf, fb, lo, hi, self._body_arrays(), bc, br, bh, stacked, configs, out
+            )
         return MotionCheck(
             free=out[:, 0].reshape(lead),
             collided=out[:, 1].astype(bool).reshape(lead),
             checks=out[:, 2].reshape(lead),
             configs=configs.reshape(lead + configs.shape[1:]),
         )
+
+    def collides(self, world: CollisionWorld, q: Array, radii: Array | None = None, halfs: Array | None = None) -> Bool:
+        """:meth:`Robot.collides`, compiled in one scene of boxes and a point cloud
+        (:func:`pointplan.robots._body_kernels.bodies_hit`: the same answers)."""
+        obstacles = None if world.boxes_only else self._obstacles(world)
+        if obstacles is None or len(self.parts.sphere_radii):
+            return super().collides(world, q, radii, halfs)
+        q = np.asarray(q, np.float64)
+        if q.shape[-1:] != (7,):
+            raise ValueError(f"expected configurations (..., 7), got {q.shape}")
+        lead = q.shape[:-1]
+        pb = len(self.parts.box_halfs)
+        hal = np.broadcast_to(self.parts.box_halfs if halfs is None else np.asarray(halfs, np.float64), lead + (pb, 3))
+        m = math.prod(lead)
+        f = np.ascontiguousarray
+        out = np.empty(m, np.bool_)
+        _body_kernels.bodies_hit(
+            f(q.reshape(m, 7)), f(hal.reshape(m, pb, 3), np.float64), self._body_arrays(), obstacles, out
+        )
+        return out.reshape(lead)
 
     def shortcut_compiled(
         self,
@@ -173,12 +198,13 @@ class SShape(Robot):
         high: Array,
     ) -> tuple[Array, int] | None:
         """Bi-RRT's shortcutting in one compiled call where every obstacle of the
-        (single-scene) world is a box (:func:`pointplan.robots._shortcut_kernels.shortcut_path`:
-        the same path and counts as the Python loop); ``None`` otherwise."""
-        if world.batch_shape != () or not world.boxes_only:
+        (single-scene) world is a box or a point cloud
+        (:func:`pointplan.robots._shortcut_kernels.shortcut_path`: the same path and counts
+        as the Python loop); ``None`` otherwise."""
+        boxes = self._obstacles(world)
+        if boxes is None:
             return None
         f = np.ascontiguousarray
-        boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
         out, checks = shortcut_path(
             1, f(path, np.float64), f(twists, np.float64), f(u, np.float64), float(resolution),
             f(low, np.float64), f(high, np.float64), 0.0, self._body_arrays(), boxes,
@@ -198,12 +224,12 @@ class SShape(Robot):
         high: Array,
     ) -> tuple[Array, bool, int] | None:
         """``march`` in one compiled call where every obstacle of the (single-scene) world
-        is a box (:func:`pointplan.robots._body_kernels.march_boxes`: the same nodes,
-        answer and counts); ``None`` otherwise."""
-        if world.batch_shape != () or not world.boxes_only:
+        is a box or a point cloud (:func:`pointplan.robots._body_kernels.march_boxes`: the
+        same nodes, answer and counts); ``None`` otherwise."""
+        boxes = self._obstacles(world)
+        if boxes is None:
             return None
         f = np.ascontiguousarray
-        boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
         nodes, reached, checks = _body_kernels.march_boxes(
             f(q0, np.float64), f(q1, np.float64), f(v, np.float64), float(step), float(resolution),
             -1 if max_steps is None else int(max_steps), f(low, np.float64), f(high, np.float64),
@@ -215,6 +241,18 @@ class SShape(Robot):
         """The node nearest to ``q`` and the twist from it (a compiled scan)."""
         i, v = _body_kernels.nearest_pose(np.ascontiguousarray(nodes, np.float64), np.ascontiguousarray(q, np.float64))
         return int(i), v
+
+    def _obstacles(self, world: CollisionWorld) -> tuple[Any, ...] | None:
+        """The obstacles of a single-scene world of boxes and point clouds as the compiled
+        checks take them: the boxes ``(centres, rotations, half sides)``, and the cloud's
+        grid (``world.cloud_grid``, cells of :attr:`cloud_cell`) where it has points;
+        ``None`` for a stacked world or one with other shapes."""
+        if world.batch_shape != () or not world.boxes_and_clouds_only:
+            return None
+        f = np.ascontiguousarray
+        boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        grid = None if world.boxes_only else world.cloud_grid(self.cloud_cell)
+        return boxes if grid is None else (*boxes, grid)
 
     def _body_arrays(self) -> tuple[Array, Array, Array]:
         """The body's box centres, half sides and corner map as the compiled kernels take
@@ -249,6 +287,9 @@ class NumpySShape(SShape):
         fallback: Bool | None = None,
     ) -> MotionCheck:
         return Robot.check_motions(self, world, q0, twist, n, low, high, fallback)
+
+    def collides(self, world: CollisionWorld, q: Array, radii: Array | None = None, halfs: Array | None = None) -> Bool:
+        return Robot.collides(self, world, q, radii, halfs)
 
     def integrate(self, q: Array, v: Array) -> Array:
         return self._integrate_numpy(q, v)
