@@ -171,6 +171,27 @@ def _check_motion(q0, tw, n, fallback, low, high, body, boxes, ws, last):  # typ
     """``check_motions`` for one motion ``q0 exp(s tw)`` in ``n`` sub-steps: returns ``(k,
     collided, checks)`` (certified free on ``[0, k / n]``) and leaves the configuration
     at ``k / n`` in ``last`` (when ``k >= 0``)."""
+    grown, poses, vs = ws[7], ws[8], ws[10]
+    bad, checks = _start(q0, tw, n, fallback, body, boxes, ws)
+    qj = poses[0]
+    for j in range(n + 1):
+        if j > 0:
+            _integrate(q0, tw, min(j / n, 1.0), qj, vs)
+            bad = _body_hits(qj, grown[0], body, boxes, ws)
+        if bad or _out_of_bounds(qj, low, high):
+            return j - 1, bad, checks
+        for i in range(7):
+            last[i] = qj[i]
+    return n, False, checks
+
+
+@_jit
+def _start(q0, tw, n, fallback, body, boxes, ws):  # type: ignore[no-untyped-def]
+    """The start of a motion in ``n`` sub-steps: the sizes grown for its sub-steps (into
+    ``ws[7][0]``), the start pose (into ``ws[8][0]``) and whether its grown check fails,
+    after, with ``fallback``, the plain start and sample 1 grown over the whole first
+    sub-step (``check_motions``' start fallback): ``(bad, checks)``, the checks of the
+    whole motion (``n + 1``, and 2 more where the fallback ran)."""
     halfs0, cv = body[1], body[2]
     grown, poses, twists, vs = ws[7], ws[8], ws[9], ws[10]
     seg = twists[1]
@@ -178,22 +199,17 @@ def _check_motion(q0, tw, n, fallback, low, high, body, boxes, ws, last):  # typ
         seg[i] = tw[i] / n
     _grow(seg, 0.5, halfs0, cv, grown[0])
     checks = n + 1
-    qj = poses[0]
-    for j in range(n + 1):
-        _integrate(q0, tw, min(j / n, 1.0), qj, vs)
-        bad = _body_hits(qj, grown[0], body, boxes, ws)
-        if j == 0 and bad and fallback:  # the start too close for its grown check
-            checks += 2
-            _grow(seg, 0.0, halfs0, cv, grown[1])
-            _grow(seg, 1.0, halfs0, cv, grown[2])
-            q1 = poses[1]
-            _integrate(q0, tw, min(1 / n, 1.0), q1, vs)
-            bad = _body_hits(qj, grown[1], body, boxes, ws) or _body_hits(q1, grown[2], body, boxes, ws)
-        if bad or _out_of_bounds(qj, low, high):
-            return j - 1, bad, checks
-        for i in range(7):
-            last[i] = qj[i]
-    return n, False, checks
+    q0s = poses[0]
+    _integrate(q0, tw, 0.0, q0s, vs)
+    bad = _body_hits(q0s, grown[0], body, boxes, ws)
+    if bad and fallback:  # the start too close for its grown check
+        checks += 2
+        _grow(seg, 0.0, halfs0, cv, grown[1])
+        _grow(seg, 1.0, halfs0, cv, grown[2])
+        q1 = poses[1]
+        _integrate(q0, tw, min(1 / n, 1.0), q1, vs)
+        bad = _body_hits(q0s, grown[1], body, boxes, ws) or _body_hits(q1, grown[2], body, boxes, ws)
+    return bad, checks
 
 
 @_jit
@@ -203,23 +219,9 @@ def motion_free(q0, tw, n, fallback, low, high, body, boxes, ws):  # type: ignor
     motion stops, so the samples are checked coarse to fine (the start first, for its
     fallback; then ``n / 2``-spaced ones, then the midpoints between them, and so on): a
     blocked motion is usually found after a few samples wherever its obstacle lies."""
-    halfs0, cv = body[1], body[2]
-    grown, poses, twists, vs = ws[7], ws[8], ws[9], ws[10]
-    seg = twists[1]
-    for i in range(6):
-        seg[i] = tw[i] / n
-    _grow(seg, 0.5, halfs0, cv, grown[0])
-    checks = n + 1
+    grown, poses, vs = ws[7], ws[8], ws[10]
+    bad, checks = _start(q0, tw, n, fallback, body, boxes, ws)
     qj = poses[0]
-    _integrate(q0, tw, 0.0, qj, vs)
-    bad = _body_hits(qj, grown[0], body, boxes, ws)
-    if bad and fallback:  # the start too close for its grown check
-        checks += 2
-        _grow(seg, 0.0, halfs0, cv, grown[1])
-        _grow(seg, 1.0, halfs0, cv, grown[2])
-        q1 = poses[1]
-        _integrate(q0, tw, min(1 / n, 1.0), q1, vs)
-        bad = _body_hits(qj, grown[1], body, boxes, ws) or _body_hits(q1, grown[2], body, boxes, ws)
     if bad or _out_of_bounds(qj, low, high):
         return False, checks
     top = 1

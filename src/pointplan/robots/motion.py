@@ -177,6 +177,66 @@ def check_motions(
     return MotionCheck(free=np.where(stopped, first, n + 1) - 1, collided=stopped & hit, checks=checks, configs=qs)
 
 
+@dataclass
+class FlatMotions:
+    """A batch of motions ``(...)`` laid out as the compiled checks read them: ``lead``
+    (the batch shape), ``q0 (M, c)``, ``twist (M, t)``, ``n (M,)`` (at least 1),
+    ``fallback (M,)``, bounds ``low, high (M, d)`` (bounds that stop nothing when none are
+    given), and the arrays the kernel fills: every sample ``configs (M, J, c)`` and ``out
+    (M, 3)`` (certified sub-steps, collided, checks)."""
+
+    lead: tuple[int, ...]
+    q0: Array
+    twist: Array
+    n: Int
+    fallback: Bool
+    low: Array
+    high: Array
+    configs: Array
+    out: Int
+
+    @classmethod
+    def of(
+        cls,
+        q0: Array,
+        twist: Array,
+        n: Int,
+        low: Array | None,
+        high: Array | None,
+        fallback: Bool | None,
+        dim: int,
+        twist_dim: int,
+    ) -> FlatMotions:
+        f = np.ascontiguousarray
+        q0 = np.asarray(q0, np.float64)
+        lead, c = q0.shape[:-1], q0.shape[-1]
+        m = int(np.prod(lead, dtype=np.int64))
+        nf = f(np.maximum(np.broadcast_to(np.asarray(n, np.int64), lead), 1).reshape(m))
+        if low is None or high is None:  # bounds that stop nothing
+            low, high = np.full(dim, -1e300), np.full(dim, 1e300)
+        return cls(
+            lead,
+            f(q0.reshape(m, c)),
+            f(np.broadcast_to(np.asarray(twist, np.float64), lead + (twist_dim,)).reshape(m, twist_dim)),
+            nf,
+            np.ones(m, bool) if fallback is None else f(np.broadcast_to(fallback, lead).reshape(m)),
+            f(np.broadcast_to(np.asarray(low, np.float64), lead + (dim,)).reshape(m, dim)),
+            f(np.broadcast_to(np.asarray(high, np.float64), lead + (dim,)).reshape(m, dim)),
+            np.empty((m, int(nf.max()) + 1 if m else 2, c)),
+            np.empty((m, 3), np.int64),
+        )
+
+    def result(self) -> MotionCheck:
+        """The :class:`MotionCheck` of the filled arrays, in the batch's shape."""
+        out, lead = self.out, self.lead
+        return MotionCheck(
+            free=out[:, 0].reshape(lead),
+            collided=out[:, 1].astype(bool).reshape(lead),
+            checks=out[:, 2].reshape(lead),
+            configs=self.configs.reshape(lead + self.configs.shape[1:]),
+        )
+
+
 def segments_free(
     robot: Robot,
     world: CollisionWorld,

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numpy.typing import NDArray
 
@@ -11,7 +9,7 @@ from ..geometry.collision import CollisionWorld
 from . import _ball_kernels
 from ._shortcut_kernels import shortcut_path
 from .base import Array, BodyParts, Bool, Robot
-from .motion import MotionCheck
+from .motion import FlatMotions, MotionCheck
 
 #: the body arrays the compiled shortcut takes for a robot without box parts (unused)
 _NO_BODY = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((6, 0)))
@@ -93,28 +91,15 @@ class _Ball(Robot):
         stacked = world.batch_shape != ()
         if not world.boxes_only or (stacked and lead != world.batch_shape):
             return super().check_motions(world, q0, twist, n, low, high, fallback)
-        d, f = self.dim, np.ascontiguousarray
-        m = math.prod(lead)
-        qf = f(q0.reshape(m, d))
-        tf = f(np.broadcast_to(np.asarray(twist, np.float64), lead + (d,)).reshape(m, d))
-        nf = f(np.maximum(np.broadcast_to(np.asarray(n, np.int64), lead), 1).reshape(m))
-        fb = np.ones(m, bool) if fallback is None else f(np.broadcast_to(fallback, lead).reshape(m))
-        if low is None or high is None:  # bounds that stop nothing
-            low, high = np.full(d, -1e300), np.full(d, 1e300)
-        lo = f(np.broadcast_to(np.asarray(low, np.float64), lead + (d,)).reshape(m, d))
-        hi = f(np.broadcast_to(np.asarray(high, np.float64), lead + (d,)).reshape(m, d))
+        f = np.ascontiguousarray
+        fm = FlatMotions.of(q0, twist, n, low, high, fallback, self.dim, self.dim)
         bc, br, bh = (f(a, np.float64) for a in (world.box_c, world.box_r, world.box_h))
         if not stacked:
             bc, br, bh = bc[None], br[None], bh[None]
-        configs = np.empty((m, int(nf.max()) + 1 if m else 2, d))
-        out = np.empty((m, 3), np.int64)
-        _ball_kernels.check_motions_balls(qf, tf, nf, fb, lo, hi, self.radius, bc, br, bh, stacked, configs, out)
-        return MotionCheck(
-            free=out[:, 0].reshape(lead),
-            collided=out[:, 1].astype(bool).reshape(lead),
-            checks=out[:, 2].reshape(lead),
-            configs=configs.reshape(lead + configs.shape[1:]),
+        _ball_kernels.check_motions_balls(
+            fm.q0, fm.twist, fm.n, fm.fallback, fm.low, fm.high, self.radius, bc, br, bh, stacked, fm.configs, fm.out
         )
+        return fm.result()
 
     def shortcut_compiled(
         self,

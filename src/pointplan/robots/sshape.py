@@ -14,7 +14,7 @@ from ..geometry.collision import CollisionWorld
 from . import _body_kernels
 from ._shortcut_kernels import shortcut_path
 from .base import Array, BodyParts, Bool, Robot
-from .motion import MotionCheck
+from .motion import FlatMotions, MotionCheck
 
 #: centreline corners of the S-shape, body frame (from the paper's release)
 S_CORNERS = np.array(
@@ -140,32 +140,20 @@ class SShape(Robot):
         obstacles = None if stacked else self._obstacles(world)
         if (not stacked and obstacles is None) or (stacked and (not world.boxes_only or lead != world.batch_shape)):
             return super().check_motions(world, q0, twist, n, low, high, fallback)
-        f = np.ascontiguousarray
-        m = math.prod(lead)
-        qf = f(np.broadcast_to(q0, lead + (7,)).reshape(m, 7))
-        tf = f(np.broadcast_to(np.asarray(twist, np.float64), lead + (6,)).reshape(m, 6))
-        nf = f(np.maximum(np.broadcast_to(np.asarray(n, np.int64), lead), 1).reshape(m))
-        fb = np.ones(m, bool) if fallback is None else f(np.broadcast_to(fallback, lead).reshape(m))
-        if low is None or high is None:  # bounds that stop nothing
-            low, high = np.full(3, -1e300), np.full(3, 1e300)
-        lo = f(np.broadcast_to(np.asarray(low, np.float64), lead + (3,)).reshape(m, 3))
-        hi = f(np.broadcast_to(np.asarray(high, np.float64), lead + (3,)).reshape(m, 3))
-        configs = np.empty((m, int(nf.max()) + 1 if m else 2, 7))
-        out = np.empty((m, 3), np.int64)
+        fm = FlatMotions.of(q0, twist, n, low, high, fallback, 3, 6)
+        body = self._body_arrays()
         if obstacles is not None and len(obstacles) == 4:
-            _body_kernels.check_motions_cloud(qf, tf, nf, fb, lo, hi, self._body_arrays(), obstacles, configs, out)
+            _body_kernels.check_motions_cloud(
+                fm.q0, fm.twist, fm.n, fm.fallback, fm.low, fm.high, body, obstacles, fm.configs, fm.out
+            )
         else:
+            f = np.ascontiguousarray
             boxes = [f(a, np.float64) for a in (world.box_c, world.box_r, world.box_h)]
             bc, br, bh = boxes if stacked else [b[None] for b in boxes]
             _body_kernels.check_motions_boxes(
-                qf, tf, nf, fb, lo, hi, self._body_arrays(), bc, br, bh, stacked, configs, out
+                fm.q0, fm.twist, fm.n, fm.fallback, fm.low, fm.high, body, bc, br, bh, stacked, fm.configs, fm.out
             )
-        return MotionCheck(
-            free=out[:, 0].reshape(lead),
-            collided=out[:, 1].astype(bool).reshape(lead),
-            checks=out[:, 2].reshape(lead),
-            configs=configs.reshape(lead + configs.shape[1:]),
-        )
+        return fm.result()
 
     def collides(self, world: CollisionWorld, q: Array, radii: Array | None = None, halfs: Array | None = None) -> Bool:
         """:meth:`Robot.collides`, compiled in one scene of boxes and a point cloud
