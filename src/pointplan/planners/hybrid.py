@@ -33,6 +33,10 @@ from ..scenes.scene import Problem
 from .base import PlanResult
 from .policy import PolicyPlanner
 
+#: seconds of a hybrid query's budget kept back from its fallback's search for stopping and
+#: joining the paths (at most 1% of the budget)
+_WRAP_UP = 0.02
+
 
 class HybridPlanner:
     """The policy, repaired by a classical planner where it fails or stalls.
@@ -77,8 +81,10 @@ class HybridPlanner:
             d = robot.distance(path, problem.goal[None])
             cut = int(np.flatnonzero(d <= d.min())[-1])  # the last of the closest ones
         sub = Problem(problem.scene, path[cut].copy(), problem.goal, tag=f"{problem.tag}/repair")
-        if self.time_limit is not None:  # what the policy left of the query's budget
-            self.fallback.time_limit = max(self.time_limit - (time.perf_counter() - t0), 1e-3)
+        if self.time_limit is not None:  # what the policy left of the query's budget, less the
+            # time a search takes to stop and return (its last iteration, its trees)
+            left = self.time_limit - (time.perf_counter() - t0)
+            self.fallback.time_limit = max(left - min(_WRAP_UP, 0.01 * self.time_limit), 1e-3)
         second = self.fallback.plan(sub)
         nodes = first.nodes + second.nodes
         checks = first.collision_checks + second.collision_checks
