@@ -25,6 +25,8 @@ bodies) this times:
     python benchmarks/bench_cloud_collision.py --points 15000 --problems 5
     python benchmarks/bench_cloud_collision.py --points 100000 --problems 5 --kdtree
     python benchmarks/bench_cloud_collision.py --points 15000 --problems 20 --success
+    python benchmarks/bench_cloud_collision.py --points 100000 --problems 400 --success \\
+        --robots sshape,sphere3d --observations local --out docs/data/clouds/success.jsonl
 """
 
 from __future__ import annotations
@@ -44,9 +46,16 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=2026)
     ap.add_argument("--kdtree", action="store_true", help="also plan through the k-d tree (the numpy checks; slow)")
     ap.add_argument("--success", action="store_true", help="compare success on boxes and on clouds instead of timing")
+    ap.add_argument("--robots", default="sshape", help="with --success: robots, comma-separated (default: %(default)s)")
+    ap.add_argument(
+        "--observations",
+        default="local,global",
+        help="with --success: policies, comma-separated (default: %(default)s)",
+    )
+    ap.add_argument("--out", default=None, help="with --success: JSON lines, one per problem and policy (appended)")
     args = ap.parse_args()
     if args.success:
-        success(args.points, args.problems, args.seed)
+        success(args)
         return
 
     from pointplan.geometry.collision import sphere_box_sqdist
@@ -125,8 +134,15 @@ def _kdtree_robot() -> Any:
     return KdTreeSShape()
 
 
-def success(n_points: int, n_problems: int, seed: int) -> None:
-    """Success of the shipped S-shape policies on problems given as boxes and as clouds."""
+def success(args: argparse.Namespace) -> None:
+    """Success of the shipped policies on problems given as boxes and as clouds of their
+    surfaces (same problems, one fresh cloud per problem); one JSON line per problem and
+    policy in ``--out`` (appended as it goes: Ctrl-C keeps what was done)."""
+    import json
+    import os
+
+    from tqdm import tqdm
+
     from pointplan.evaluation import check_path
     from pointplan.geometry.sampling import area_weighted_points
     from pointplan.geometry.shapes import PointCloud
@@ -134,22 +150,59 @@ def success(n_points: int, n_problems: int, seed: int) -> None:
     from pointplan.scenes.scenarios import make_scenario
     from pointplan.scenes.scene import Problem, Scene
 
-    sc = make_scenario("boxes3d", robot="sshape")
-    problems = sc.problems("test", n_problems, seed=seed)
-    for obs in ("local", "global"):
-        rng = np.random.default_rng(seed)
-        planner = make_planner("policy", sc.robot, observation=obs)
-        boxes = claimed = free = 0
-        for p in problems:
-            pts, nrm, _ = area_weighted_points(p.scene.obstacles, n_points, rng)
-            cloud = Problem(Scene([PointCloud(pts, nrm)], p.scene.low, p.scene.high), p.start, p.goal)
-            boxes += bool(check_path(sc.robot, p, planner.plan(p).path))
-            res = planner.plan(cloud)
-            claimed += res.success
-            free += bool(res.success and check_path(sc.robot, p, res.path))
+    out = open(args.out, "a") if args.out else None  # noqa: SIM115 (closed in finally)
+    rows: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    try:
+        for robot in args.robots.split(","):
+            sc = make_scenario("boxes3d", robot=robot)
+            problems = sc.problems("test", args.problems, seed=args.seed)
+            for obs in args.observations.split(","):
+                rng = np.random.default_rng(args.seed)
+                planner = make_planner("policy", sc.robot, observation=obs)
+                got = rows.setdefault((robot, obs), [])
+                for i, p in enumerate(tqdm(problems, desc=f"{robot} {obs}", unit="problem")):
+                    pts, nrm, _ = area_weighted_points(p.scene.obstacles, args.points, rng)
+                    cloud = Problem(Scene([PointCloud(pts, nrm)], p.scene.low, p.scene.high), p.start, p.goal)
+                    t = time.perf_counter()
+                    on_boxes = planner.plan(p)
+                    t_boxes = time.perf_counter() - t
+                    t = time.perf_counter()
+                    on_cloud = planner.plan(cloud)
+                    t_cloud = time.perf_counter() - t
+                    row = {
+                        "robot": robot,
+                        "observation": obs,
+                        "index": i,
+                        "points": args.points,
+                        "boxes": bool(check_path(sc.robot, p, on_boxes.path)),
+                        "cloud_claimed": bool(on_cloud.success),
+                        "cloud_free": bool(on_cloud.success and check_path(sc.robot, p, on_cloud.path)),
+                        "time_boxes_s": t_boxes,
+                        "time_cloud_s": t_cloud,
+                    }
+                    got.append(row)
+                    if out is not None:
+                        out.write(json.dumps(row) + "\n")
+                        out.flush()
+    except KeyboardInterrupt:
+        print("interrupted: the problems done so far")
+    finally:
+        if out is not None:
+            out.close()
+    for (robot, obs), got in rows.items():
+        n = len(got)
+        if not n:
+            continue
+        b, c, f = (sum(r[k] for r in got) for k in ("boxes", "cloud_claimed", "cloud_free"))
+        tb = float(np.median([r["time_boxes_s"] for r in got]))
+        tc = float(np.median([r["time_cloud_s"] for r in got]))
         print(
-            f"S-shape {obs}: boxes {boxes}/{n_problems}; clouds of {n_points} points: {claimed} claimed, {free} free of the true boxes"
+            f"{robot} {obs}: boxes {b}/{n} ({100 * b / n:.1f}%); clouds of {args.points} points: "
+            f"{c} claimed, {f} free of the true boxes ({100 * f / n:.1f}%); "
+            f"median query {1e3 * tb:.1f} ms on boxes, {1e3 * tc:.1f} ms on the cloud"
         )
+    if args.out:
+        print(f"records: {os.path.abspath(args.out)}")
 
 
 if __name__ == "__main__":

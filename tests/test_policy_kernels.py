@@ -219,7 +219,10 @@ def test_ball_motion_checks_and_march_are_the_numpy_ones(env: str) -> None:
                 march(robot, p, q0[i], q0[i + 1], step, 0.01, budget),
                 march(plain, p, q0[i], q0[i + 1], step, 0.01, budget),
             )
-            assert np.array_equal(ma.nodes, mb.nodes) and (ma.reached, ma.checks) == (mb.reached, mb.checks)
+            # (nodes to the last bit or two: numpy's and the compiler's vector code may round
+            # a product differently on some CPUs; answers and counts exactly)
+            assert ma.nodes.shape == mb.nodes.shape and np.allclose(ma.nodes, mb.nodes, rtol=0, atol=1e-13)
+            assert (ma.reached, ma.checks) == (mb.reached, mb.checks)
     assert len(kinds) >= 3
     stacked = CollisionWorld.stack([p.scene.world for p in problems])
     q0 = np.stack([rng.uniform(p.scene.low, p.scene.high) for p in problems])
@@ -234,8 +237,7 @@ def test_ball_motion_checks_and_march_are_the_numpy_ones(env: str) -> None:
     for p in problems[:3]:
         ra = BiRRT(robot, max_nodes=2000, shortcut_probes=0).plan(p)
         rb = BiRRT(plain, max_nodes=2000, shortcut_probes=0).plan(p)
-        assert (
-            ra.success == rb.success and np.array_equal(ra.path, rb.path) and ra.collision_checks == rb.collision_checks
-        )
+        assert ra.success == rb.success and ra.collision_checks == rb.collision_checks
+        assert ra.path.shape == rb.path.shape and np.allclose(ra.path, rb.path, rtol=0, atol=1e-12)
         shortened += ra.success and len(ra.path) < len(ra.raw_path)
     assert shortened > 0

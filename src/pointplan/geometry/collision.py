@@ -221,6 +221,26 @@ class CollisionWorld:
         grid: CloudGrid | None = cache[key]
         return grid
 
+    def cloud_ray_grid(self, cell: float) -> tuple[CloudGrid, Array, NDArray[np.int64]] | None:
+        """:meth:`cloud_grid` with what ray casting needs besides: the points' normals in
+        the grid's order (zeros where the cloud has none) and their indices in the cloud
+        (``grid[0] == cloud points[order]``); ``None`` where the scene has no cloud
+        points. Cached like the grid."""
+        grid = self.cloud_grid(cell)
+        if grid is None:
+            return None
+        cache = self.__dict__.setdefault("_cloud_ray_grids", {})
+        key = float(cell)
+        if key not in cache:
+            tree = self.cloud_trees[0]
+            assert tree is not None  # (the grid exists)
+            order = cloud_grid_order(tree.data, grid)
+            nrm = self.cloud_normals[0] if self.cloud_normals else None
+            normals = np.zeros((len(order), 3)) if nrm is None else np.asarray(nrm, np.float64)[order]
+            cache[key] = (grid, np.ascontiguousarray(normals), order)
+        out: tuple[CloudGrid, Array, NDArray[np.int64]] = cache[key]
+        return out
+
     # ------------------------------------------------------------------ build
     @classmethod
     def from_shapes(cls, shapes: Sequence[Shape], dim: int) -> CollisionWorld:
@@ -548,6 +568,18 @@ def cloud_grid_arrays(points: Array, cell: float, margin: float) -> CloudGrid:
     scale = float(np.max(np.abs(p))) + float(np.max(extent)) + cell
     params = np.array([inv, cell, float(margin), 1e-9 * scale])
     return np.ascontiguousarray(p[order]), starts, np.ascontiguousarray(origin), dims, params, cum.reshape(-1)
+
+
+def cloud_grid_order(points: Array, grid: CloudGrid) -> NDArray[np.int64]:
+    """Where each of the grid's sorted points comes from in ``points``, the cloud the grid
+    was built from (:func:`cloud_grid_arrays`: the same cells, the same stable sort)."""
+    p = np.ascontiguousarray(points, np.float64).reshape(-1, 3)
+    _, _, origin, dims, params, _ = grid
+    key3 = np.floor((p - origin) * params[0]).astype(np.int64)
+    order = np.argsort((key3[:, 0] * dims[1] + key3[:, 1]) * dims[2] + key3[:, 2], kind="stable")
+    if not np.array_equal(p[order], grid[0]):
+        raise ValueError("the grid was not built from these points")
+    return order
 
 
 def boxes_contain_cloud_points(tree: cKDTree, c: Array, rot: Array, h: Array, margin: float = 0.0) -> Bool:

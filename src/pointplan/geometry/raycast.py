@@ -589,7 +589,12 @@ def _cloud_hits(
         centre = o2[b].mean(0)
         spread = float(np.sqrt(np.max(np.sum((o2[b] - centre) ** 2, -1))))
         reach = spread + max_range + radius
-        cand = np.asarray(tree.query_ball_point(centre, reach), np.int64) if np.isfinite(reach) else np.arange(tree.n)
+        # (in the cloud's order: of equally near points the first one's normal is taken)
+        cand = (
+            np.sort(np.asarray(tree.query_ball_point(centre, reach), np.int64))
+            if np.isfinite(reach)
+            else np.arange(tree.n)
+        )
         if not len(cand):
             continue
         nb = best[b].copy()

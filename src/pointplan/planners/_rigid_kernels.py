@@ -37,6 +37,7 @@ from ..robots._body_kernels import (
     _scratch,
     motion_free,
 )
+from ..robots._cloud_kernels import _cloud_normal, _ray_cloud
 from ._policy_kernels import (
     END_ESCAPE,
     END_GREEDY,
@@ -155,10 +156,11 @@ def _frame(kind, q, rot):  # type: ignore[no-untyped-def]
 def _cast(q, kind, rays, rboxes, low, high, max_range, hits, rot, scratch):  # type: ignore[no-untyped-def]
     """``LocalRays.cast`` for one robot: rays from the body (``rays``: body-frame origins
     and directions ``(R, 3)``) against the boxes ``rboxes`` (obstacles and wall slabs,
-    with a validity flag each); writes ``hits (R, 7)``: point, normal, and 1.0 where the
+    with a validity flag each; with a cloud, also its grid, normals and indices:
+    :func:`~pointplan.robots._cloud_kernels._ray_cloud`); writes ``hits (R, 7)``: point, normal, and 1.0 where the
     ray hit within range from an origin inside the bounds (else 0)."""
     bo, bd = rays
-    box_c, box_r, box_h, valid = rboxes
+    box_c, box_r, box_h, valid = rboxes[0], rboxes[1], rboxes[2], rboxes[3]
     o, d, t0, t1, ax = scratch
     _frame(kind, q, rot)
     nr, nk = bo.shape[0], box_c.shape[0]
@@ -177,16 +179,19 @@ def _cast(q, kind, rays, rboxes, low, high, max_range, hits, rot, scratch):  # t
                 tk = max(t0[k], 0.0)
                 if tk < best:
                     best, kb = tk, k
+        best, kc = _ray_cloud(rboxes, o[r], d[r], best, max_range)  # a nearer cloud point
         inside_bounds = True
         for i in range(3):
             if not (o[r, i] > low[i] and o[r, i] < high[i]):
                 inside_bounds = False
-        if kb < 0 or not best <= max_range or not inside_bounds:
+        if (kb < 0 and kc < 0) or not best <= max_range or not inside_bounds:
             for i in range(7):
                 hits[r, i] = 0.0
             continue
         n0, n1, n2 = -d[r, 0], -d[r, 1], -d[r, 2]
-        if not t0[kb] < 0.0:  # entered through a face: its outward axis
+        if kc >= 0:  # the point's normal
+            n0, n1, n2 = _cloud_normal(rboxes, kc)
+        elif not t0[kb] < 0.0:  # entered through a face: its outward axis
             n0, n1, n2 = box_r[kb, 0, ax[kb]], box_r[kb, 1, ax[kb]], box_r[kb, 2, ax[kb]]
         nn = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
         if nn > 0:

@@ -284,7 +284,7 @@ class CompiledRays:
         seeing points, also a point cloud's grid), the boxes rays hit (with the wall slabs)
         or the points the robot sees; ``None`` where the scene has other obstacles."""
         world, observer = scene.world, self.engine.observer
-        clouds = self.sees == RK.POINTS and self.kind == RK.BODY and not scene.dynamic
+        clouds = self.kind == RK.BODY and not scene.dynamic
         if not (_boxes_only(scene) or (clouds and world.batch_shape == () and world.boxes_and_clouds_only)):
             return None
         f = np.ascontiguousarray
@@ -295,7 +295,7 @@ class CompiledRays:
         if self.sees == RK.POINTS:
             observer.set_scene(0, scene)
             pts, nrm = (f(a, np.float64) for a in observer.points_one())
-            rboxes = (empty, np.zeros((0, 3, 3)), empty, np.zeros(0, bool))
+            rboxes: tuple[Any, ...] = (empty, np.zeros((0, 3, 3)), empty, np.zeros(0, bool))
         else:
             rw = observer.ray_world(scene)
             pts, nrm = empty, empty
@@ -305,6 +305,9 @@ class CompiledRays:
                 f(rw.box_h, np.float64),
                 np.any(rw.box_h > 0, -1),
             )
+            ray_grid = rw.cloud_ray_grid(self.engine.robot.cloud_cell) if clouds else None  # type: ignore[attr-defined]
+            if ray_grid is not None:  # the rays hit the cloud's points too
+                rboxes = (*rboxes, *ray_grid)
         return boxes, rboxes, pts, nrm, f(scene.low, np.float64), f(scene.high, np.float64)
 
     def _params(self, sampled: bool) -> tuple[np.ndarray, np.ndarray]:

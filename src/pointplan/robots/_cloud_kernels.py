@@ -148,6 +148,137 @@ def boxes_hit_cloud(c, rot, h, grid, out):  # type: ignore[no-untyped-def]
         out[i] = box_hits_cloud(c[i], rot[i], h[i], grid)
 
 
+@_jit
+def ray_hits_cloud(o, d, grid, oid, limit, bound):  # type: ignore[no-untyped-def]
+    """The first of the cloud's spheres (the grid's points, its point radius) that the ray
+    from ``o (3,)`` along the unit ``d (3,)`` enters, if closer than ``limit``: ``(t, its
+    row in the grid's order)``, else ``(limit, -1)``; found for every ``t`` up to
+    ``bound`` (further hits may be missed). The answer of
+    :func:`pointplan.geometry.raycast._first_cloud_hits` with the same arithmetic, ties
+    going to the lowest index in the cloud (``oid``: the rows' indices there).
+
+    The cells the ray passes through are walked in order (Amanatides and Woo's traversal,
+    from ``o``), each with the block of cells within ``k`` cells of it, ``k`` the point
+    radius in cells rounded up: a sphere the ray enters at ``t_e`` holds the ray's point
+    at ``t* = max(t_p, 0)`` (``t_p`` the centre's projection, ``t_e >= t* - radius``),
+    whose cell is within ``k`` cells of the centre's, so the walk stops at the first cell
+    entered past the best hit (or ``bound``) plus the radius."""
+    pts, starts, origin, dims, params, cum = grid
+    inv, r = params[0], params[2]
+    r2 = r * r
+    n0, n1, n2 = dims[0], dims[1], dims[2]
+    k = int(math.floor(r * inv + 1e-6)) + 1
+    slack = 1e-9 * (1.0 + abs(bound))
+    d0, d1, d2 = d[0], d[1], d[2]
+    c0, c1, c2 = (o[0] - origin[0]) * inv, (o[1] - origin[1]) * inv, (o[2] - origin[2]) * inv
+    i0, i1, i2 = math.floor(c0), math.floor(c1), math.floor(c2)
+    s0, t0, e0 = _axis_walk(c0, i0, d0 * inv)
+    s1, t1, e1 = _axis_walk(c1, i1, d1 * inv)
+    s2, t2, e2 = _axis_walk(c2, i2, d2 * inv)
+    # past ``far`` the ray is more than k cells outside the grid along some axis, for good
+    far = min(_axis_exit(c0, d0 * inv, n0, k), _axis_exit(c1, d1 * inv, n1, k), _axis_exit(c2, d2 * inv, n2, k))
+    best, which = limit, -1
+    entry = 0.0
+    while entry <= far and entry - r <= min(best, bound) + slack:
+        x0, x1 = max(i0 - k, 0), min(i0 + k, n0 - 1)
+        y0, y1 = max(i1 - k, 0), min(i1 + k, n1 - 1)
+        z0, z1 = max(i2 - k, 0), min(i2 + k, n2 - 1)
+        if x0 <= x1 and y0 <= y1 and z0 <= z1 and _count(cum, n1, n2, x0, x1, y0, y1, z0, z1) > 0:
+            for a in range(x0, x1 + 1):
+                for b in range(y0, y1 + 1):
+                    row = (a * n1 + b) * n2
+                    for t in range(starts[row + z0], starts[row + z1 + 1]):
+                        px, py, pz = pts[t, 0] - o[0], pts[t, 1] - o[1], pts[t, 2] - o[2]
+                        tt = px * d0 + py * d1 + pz * d2
+                        if tt + r < 0.0 or tt - r > best:
+                            continue
+                        q2 = px * px + py * py + pz * pz - tt * tt
+                        if q2 > r2:
+                            continue
+                        te = tt - np.sqrt(r2 - q2)
+                        if te < 0.0:
+                            te = 0.0
+                        if te < best or (te == best and which >= 0 and oid[t] < oid[which]):
+                            best, which = te, t
+        # the next cell along the ray: across the nearest cell wall
+        if t0 <= t1 and t0 <= t2:
+            entry, i0, t0 = t0, i0 + s0, t0 + e0
+        elif t1 <= t2:
+            entry, i1, t1 = t1, i1 + s1, t1 + e1
+        else:
+            entry, i2, t2 = t2, i2 + s2, t2 + e2
+        if not entry < np.inf:
+            break
+    return best, which
+
+
+@_jit
+def _axis_walk(c, i, v):  # type: ignore[no-untyped-def]
+    """One axis of the traversal: the step, the ray's distance to the first cell wall it
+    crosses and between walls, for the coordinate ``c`` in cells (in cell ``i``) moving by
+    ``v`` cells per unit of distance."""
+    if v > 0.0:
+        return 1, (i + 1.0 - c) / v, 1.0 / v
+    if v < 0.0:
+        return -1, (i - c) / v, -1.0 / v
+    return 0, np.inf, np.inf
+
+
+@_jit
+def _axis_exit(c, v, n, k):  # type: ignore[no-untyped-def]
+    """The distance along the ray past which its coordinate ``c`` (in cells, moving by
+    ``v`` per unit of distance) is outside ``[-k, n + k]`` for good (``-1``: always is)."""
+    if v > 0.0:
+        return (n + k - c) / v
+    if v < 0.0:
+        return (-k - c) / v
+    return np.inf if -k <= c <= n + k else -1.0
+
+
+def _ray_cloud(rboxes, o, d, limit, bound):  # type: ignore[no-untyped-def]
+    """:func:`ray_hits_cloud` against the cloud of the ray-casting obstacles ``rboxes``
+    (``(box centres, rotations, half sides, valid)``: no cloud, ``(limit, -1)``; ``(...,
+    grid, normals in the grid's order, indices in the cloud)``). Compiled callers only."""
+    raise NotImplementedError("_ray_cloud is called from compiled code only")
+
+
+@overload(_ray_cloud, jit_options={"nogil": True, "error_model": "numpy"})
+def _ray_cloud_impl(rboxes, o, d, limit, bound):  # type: ignore[no-untyped-def]
+    if isinstance(rboxes, types.BaseTuple) and len(rboxes) == 7:
+
+        def with_cloud(rboxes, o, d, limit, bound):  # type: ignore[no-untyped-def]
+            return ray_hits_cloud(o, d, rboxes[4], rboxes[6], limit, bound)
+
+        return with_cloud
+
+    def without(rboxes, o, d, limit, bound):  # type: ignore[no-untyped-def]
+        return limit, -1
+
+    return without
+
+
+def _cloud_normal(rboxes, row):  # type: ignore[no-untyped-def]
+    """The normal of the cloud point in ``row`` (the grid's order) of the ray-casting
+    obstacles ``rboxes`` with a cloud (see :func:`_ray_cloud`). Compiled callers only."""
+    raise NotImplementedError("_cloud_normal is called from compiled code only")
+
+
+@overload(_cloud_normal, jit_options={"nogil": True, "error_model": "numpy"})
+def _cloud_normal_impl(rboxes, row):  # type: ignore[no-untyped-def]
+    if isinstance(rboxes, types.BaseTuple) and len(rboxes) == 7:
+
+        def with_cloud(rboxes, row):  # type: ignore[no-untyped-def]
+            nrm = rboxes[5]
+            return nrm[row, 0], nrm[row, 1], nrm[row, 2]
+
+        return with_cloud
+
+    def without(rboxes, row):  # type: ignore[no-untyped-def]
+        return 0.0, 0.0, 0.0
+
+    return without
+
+
 def boxes_contain_cloud_points_compiled(
     grid: tuple[np.ndarray, ...], c: np.ndarray, rot: np.ndarray, h: np.ndarray
 ) -> np.ndarray:
