@@ -183,6 +183,12 @@ class CollisionWorld:
     def batch_shape(self) -> tuple[int, ...]:
         return self.box_c.shape[:-2]
 
+    def box_arrays(self) -> tuple[Array, Array, Array]:
+        """The boxes as the compiled kernels take them: contiguous float64 ``(centres,
+        rotations, half sides)``."""
+        f = np.ascontiguousarray
+        return f(self.box_c, np.float64), f(self.box_r, np.float64), f(self.box_h, np.float64)
+
     @property
     def boxes_only(self) -> bool:
         """Are all the obstacles boxes (no spheres, capsules, cylinders, cones, meshes or

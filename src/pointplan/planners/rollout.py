@@ -236,8 +236,7 @@ class GoalTester:
             and all(type(o) is Box for o in scene.obstacles)
             and world.box_c.shape[0] == len(scene.obstacles)
         ):
-            f = np.ascontiguousarray
-            self.boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+            self.boxes = world.box_arrays()
         self.radius = float(getattr(robot, "radius", 0.0)) * (1.0 - 1e-9)
 
     def free(self, q: np.ndarray, certify: bool = True) -> tuple[bool, int]:

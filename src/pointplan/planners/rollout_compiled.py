@@ -184,7 +184,7 @@ class CompiledBall:
             return None
         f = np.ascontiguousarray
         nrm = f(nrm, np.float64) if observer.with_normals else np.zeros((len(pts), 0))
-        boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        boxes = world.box_arrays()
         stream = self.engine._uniforms(self.engine.horizon * (max(len(pts), 1) + observer.n_points))
         return (scene.low, scene.high, *boxes, f(pts, np.float64), nrm, *self.args, stream)
 
@@ -288,7 +288,7 @@ class CompiledRays:
         if not (_boxes_only(scene) or (clouds and world.batch_shape == () and world.boxes_and_clouds_only)):
             return None
         f = np.ascontiguousarray
-        boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        boxes = world.box_arrays()
         if clouds:
             boxes = self.engine.robot._obstacles(world)  # type: ignore[attr-defined]  # (boxes and the cloud grid)
         empty = np.zeros((0, 3))

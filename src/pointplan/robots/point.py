@@ -117,7 +117,7 @@ class _Ball(Robot):
         if world.batch_shape != () or not world.boxes_only:
             return None
         f = np.ascontiguousarray
-        boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        boxes = world.box_arrays()
         out, checks = shortcut_path(
             0, f(path, np.float64), f(twists, np.float64), f(u, np.float64), float(resolution),
             f(low, np.float64), f(high, np.float64), self.radius, _NO_BODY, boxes,
@@ -144,7 +144,7 @@ class _Ball(Robot):
         nodes, reached, checks = _ball_kernels.march_balls(
             f(q0, np.float64), f(q1, np.float64), f(v, np.float64), float(step), float(resolution),
             -1 if max_steps is None else int(max_steps), f(low, np.float64), f(high, np.float64), self.radius,
-            f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64),
+            *world.box_arrays(),
         )  # fmt: skip
         return nodes, bool(reached), int(checks)
 

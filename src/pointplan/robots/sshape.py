@@ -237,8 +237,7 @@ class SShape(Robot):
         ``None`` for a stacked world or one with other shapes."""
         if world.batch_shape != () or not world.boxes_and_clouds_only:
             return None
-        f = np.ascontiguousarray
-        boxes = (f(world.box_c, np.float64), f(world.box_r, np.float64), f(world.box_h, np.float64))
+        boxes = world.box_arrays()
         grid = None if world.boxes_only else world.cloud_grid(self.cloud_cell)
         return boxes if grid is None else (*boxes, grid)
 
