@@ -305,7 +305,9 @@ class CompiledRays:
                 f(rw.box_h, np.float64),
                 np.any(rw.box_h > 0, -1),
             )
-            ray_grid = rw.cloud_ray_grid(self.engine.robot.cloud_cell) if clouds else None  # type: ignore[attr-defined]
+            # (cells twice the point radius: a ray tests the points of the 27 cells around
+            # each cell it crosses, few where they are small)
+            ray_grid = rw.cloud_ray_grid(2.0 * float(rw.cloud_radius[0])) if clouds and rw.cloud_radius else None
             if ray_grid is not None:  # the rays hit the cloud's points too
                 rboxes = (*rboxes, *ray_grid)
         return boxes, rboxes, pts, nrm, f(scene.low, np.float64), f(scene.high, np.float64)
