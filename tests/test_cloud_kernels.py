@@ -243,7 +243,7 @@ def test_the_points_policy_on_a_cloud_is_compiled_and_the_step_loop(cloud_proble
     assert same >= len(cloud_problems) - 1
 
 
-@pytest.mark.parametrize(("n_points", "cell"), [(20000, 0.036), (1500, 0.036), (20000, 0.006)])
+@pytest.mark.parametrize(("n_points", "cell"), [(20000, 0.036), (1500, 0.036), (20000, 0.006), (20000, 0.0128)])
 def test_rays_hit_the_grid_as_the_brute_force(n_points: int, cell: float) -> None:
     """``ray_hits_cloud`` (the cells along the ray) against ``_first_cloud_hits`` over every
     point of the cloud: the same distance, the same point (the lowest index of equally near

@@ -558,3 +558,16 @@ def test_a_scanned_surface_is_seen_like_the_surface() -> None:
     assert np.percentile(np.abs(err), 99) <= radius * 1.5 and err.min() > -radius
     cos = np.sum(hb.normals[both] * hc.normals[both], -1)
     assert np.mean(cos > 0.99) > 0.98
+
+
+def test_a_cloud_point_behind_the_origin_is_not_hit() -> None:
+    """A ray leaving a point's sphere from just outside it, or from inside it, sees the
+    sphere only in front of it: a sphere wholly behind the origin (its centre 1.2 radii
+    back) is not hit (it was, at distance 0, until the exit was tested), one ahead is,
+    at its entry, and one holding the origin is, at 0."""
+    world = CollisionWorld.from_shapes([PointCloud(np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]]), radius=0.01)], 3)
+    o = np.array([[0.0, 0.012, 0.0], [0.0, 0.012, 0.0], [0.0, 0.005, 0.0], [0.003, 0.011, 0.0]])
+    d = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    hits = cast_rays(world, o, d, 1.0)
+    assert hits.hit.tolist() == [False, True, True, False]
+    assert hits.distance[1] == pytest.approx(0.002) and hits.distance[2] == 0.0

@@ -566,7 +566,10 @@ def _first_cloud_hits(o, d, pts, radius, best, which):  # type: ignore[no-untype
             q2 = px * px + py * py + pz * pz - t * t
             if q2 > r2:
                 continue
-            te = t - np.sqrt(r2 - q2)
+            half = np.sqrt(r2 - q2)
+            if t + half < 0.0:  # the sphere lies behind the origin
+                continue
+            te = t - half
             if te < 0.0:
                 te = 0.0
             if te < bi:

@@ -163,9 +163,8 @@ def ray_hits_cloud(o, d, grid, oid, limit, bound):  # type: ignore[no-untyped-de
     at ``t* = max(t_p, 0)`` (``t_p`` the centre's projection, ``t_e >= t* - radius``),
     whose cell is within ``k`` cells of the centre's, so the walk stops at the first cell
     entered past the best hit (or ``bound``) plus the radius."""
-    pts, starts, origin, dims, params, cum = grid
+    origin, dims, params = grid[2], grid[3], grid[4]
     inv, r = params[0], params[2]
-    r2 = r * r
     n0, n1, n2 = dims[0], dims[1], dims[2]
     k = int(math.floor(r * inv + 1e-6)) + 1
     slack = 1e-9 * (1.0 + abs(bound))
@@ -179,36 +178,60 @@ def ray_hits_cloud(o, d, grid, oid, limit, bound):  # type: ignore[no-untyped-de
     far = min(_axis_exit(c0, d0 * inv, n0, k), _axis_exit(c1, d1 * inv, n1, k), _axis_exit(c2, d2 * inv, n2, k))
     best, which = limit, -1
     entry = 0.0
+    # the first cell's whole block, then after each step only the block's new face (the
+    # blocks of the cells walked so far are then all tested, each cell about once)
+    lo0, hi0, lo1, hi1, lo2, hi2 = i0 - k, i0 + k, i1 - k, i1 + k, i2 - k, i2 + k
     while entry <= far and entry - r <= min(best, bound) + slack:
-        x0, x1 = max(i0 - k, 0), min(i0 + k, n0 - 1)
-        y0, y1 = max(i1 - k, 0), min(i1 + k, n1 - 1)
-        z0, z1 = max(i2 - k, 0), min(i2 + k, n2 - 1)
-        if x0 <= x1 and y0 <= y1 and z0 <= z1 and _count(cum, n1, n2, x0, x1, y0, y1, z0, z1) > 0:
-            for a in range(x0, x1 + 1):
-                for b in range(y0, y1 + 1):
-                    row = (a * n1 + b) * n2
-                    for t in range(starts[row + z0], starts[row + z1 + 1]):
-                        px, py, pz = pts[t, 0] - o[0], pts[t, 1] - o[1], pts[t, 2] - o[2]
-                        tt = px * d0 + py * d1 + pz * d2
-                        if tt + r < 0.0 or tt - r > best:
-                            continue
-                        q2 = px * px + py * py + pz * pz - tt * tt
-                        if q2 > r2:
-                            continue
-                        te = tt - np.sqrt(r2 - q2)
-                        if te < 0.0:
-                            te = 0.0
-                        if te < best or (te == best and which >= 0 and oid[t] < oid[which]):
-                            best, which = te, t
+        best, which = _block_hits(o, d, grid, oid, lo0, hi0, lo1, hi1, lo2, hi2, best, which)
         # the next cell along the ray: across the nearest cell wall
         if t0 <= t1 and t0 <= t2:
             entry, i0, t0 = t0, i0 + s0, t0 + e0
+            lo0 = hi0 = i0 + s0 * k
+            lo1, hi1, lo2, hi2 = i1 - k, i1 + k, i2 - k, i2 + k
         elif t1 <= t2:
             entry, i1, t1 = t1, i1 + s1, t1 + e1
+            lo1 = hi1 = i1 + s1 * k
+            lo0, hi0, lo2, hi2 = i0 - k, i0 + k, i2 - k, i2 + k
         else:
             entry, i2, t2 = t2, i2 + s2, t2 + e2
+            lo2 = hi2 = i2 + s2 * k
+            lo0, hi0, lo1, hi1 = i0 - k, i0 + k, i1 - k, i1 + k
         if not entry < np.inf:
             break
+    return best, which
+
+
+@_jit
+def _block_hits(o, d, grid, oid, x0, x1, y0, y1, z0, z1, best, which):  # type: ignore[no-untyped-def]
+    """:func:`ray_hits_cloud`'s test of the points in the cells ``[x0, x1] x [y0, y1] x
+    [z0, z1]`` (clipped to the grid): the nearer ``(best, which)``."""
+    pts, starts, _, dims, params, cum = grid
+    r = params[2]
+    r2 = r * r
+    n0, n1, n2 = dims[0], dims[1], dims[2]
+    x0, x1, y0, y1, z0, z1 = max(x0, 0), min(x1, n0 - 1), max(y0, 0), min(y1, n1 - 1), max(z0, 0), min(z1, n2 - 1)
+    if x0 > x1 or y0 > y1 or z0 > z1 or _count(cum, n1, n2, x0, x1, y0, y1, z0, z1) == 0:
+        return best, which
+    d0, d1, d2 = d[0], d[1], d[2]
+    for a in range(x0, x1 + 1):
+        for b in range(y0, y1 + 1):
+            row = (a * n1 + b) * n2
+            for t in range(starts[row + z0], starts[row + z1 + 1]):
+                px, py, pz = pts[t, 0] - o[0], pts[t, 1] - o[1], pts[t, 2] - o[2]
+                tt = px * d0 + py * d1 + pz * d2
+                if tt + r < 0.0 or tt - r > best:
+                    continue
+                q2 = px * px + py * py + pz * pz - tt * tt
+                if q2 > r2:
+                    continue
+                half = np.sqrt(r2 - q2)
+                if tt + half < 0.0:  # the sphere lies behind the origin
+                    continue
+                te = tt - half
+                if te < 0.0:
+                    te = 0.0
+                if te < best or (te == best and which >= 0 and oid[t] < oid[which]):
+                    best, which = te, t
     return best, which
 
 
