@@ -176,12 +176,18 @@ def success(args: argparse.Namespace) -> None:
                     t = time.perf_counter()
                     planner.plan(p)
                     t_boxes_again = time.perf_counter() - t
+                    boxes_check = check_path(sc.robot, p, on_boxes.path)
                     row = {
                         "robot": robot,
                         "observation": obs,
                         "index": i,
                         "points": args.points,
-                        "boxes": bool(check_path(sc.robot, p, on_boxes.path)),
+                        "point_radius": float(cloud.scene.obstacles[0].point_radius()),
+                        "boxes": bool(boxes_check),
+                        # how near the boxes the path on the boxes passes (a cloud is thicker by its point radius)
+                        "boxes_clearance": (
+                            float(boxes_check.clearance) if boxes_check and np.isfinite(boxes_check.clearance) else None
+                        ),
                         "cloud_claimed": bool(on_cloud.success),
                         "cloud_free": bool(on_cloud.success and check_path(sc.robot, p, on_cloud.path)),
                         "time_boxes_s": t_boxes,
@@ -203,6 +209,8 @@ def success(args: argparse.Namespace) -> None:
         if not n:
             continue
         b, c, f = (sum(r[k] for r in got) for k in ("boxes", "cloud_claimed", "cloud_free"))
+        lost = [r for r in got if r["boxes"] and not r["cloud_free"]]
+        thin = sum(r.get("boxes_clearance") is not None and r["boxes_clearance"] < r["point_radius"] for r in lost)
         tb, tc, tb2, tc2 = (
             1e3 * float(np.median([r[k] for r in got]))
             for k in ("time_boxes_s", "time_cloud_s", "time_boxes_again_s", "time_cloud_again_s")
@@ -210,7 +218,8 @@ def success(args: argparse.Namespace) -> None:
         print(
             f"{robot} {obs}: boxes {b}/{n} ({100 * b / n:.1f}%); clouds of {args.points} points: "
             f"{c} claimed, {f} free of the true boxes ({100 * f / n:.1f}%); median query on boxes "
-            f"{tb:.1f} ms (again {tb2:.1f}), on the cloud {tc:.1f} ms (again, its structures built: {tc2:.1f})"
+            f"{tb:.1f} ms (again {tb2:.1f}), on the cloud {tc:.1f} ms (again, its structures built: {tc2:.1f}); "
+            f"of the {len(lost)} solved on the boxes only, {thin} passed the boxes closer than the point radius"
         )
     if args.out:
         print(f"records: {os.path.abspath(args.out)}")
