@@ -555,27 +555,33 @@ def _first_cloud_hits(o, d, pts, radius, best, which):  # type: ignore[no-untype
     """For each ray ``(o[i], d[i])`` (unit ``d``), the entry distance into the nearest of
     the spheres of ``radius`` around ``pts`` closer than ``best[i]``: updates ``best`` and
     ``which`` (the point's index) in place."""
-    r2 = radius * radius
     for i in range(o.shape[0]):
         bi = best[i]
         for k in range(pts.shape[0]):
-            px, py, pz = pts[k, 0] - o[i, 0], pts[k, 1] - o[i, 1], pts[k, 2] - o[i, 2]
-            t = px * d[i, 0] + py * d[i, 1] + pz * d[i, 2]
-            if t + radius < 0.0 or t - radius >= bi:
-                continue
-            q2 = px * px + py * py + pz * pz - t * t
-            if q2 > r2:
-                continue
-            half = np.sqrt(r2 - q2)
-            if t + half < 0.0:  # the sphere lies behind the origin
-                continue
-            te = t - half
-            if te < 0.0:
-                te = 0.0
-            if te < bi:
+            te = sphere_entry(pts, k, o[i], d[i], radius, bi)
+            if 0.0 <= te < bi:
                 bi = te
                 which[i] = k
         best[i] = bi
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def sphere_entry(pts, k, o, d, radius, best):  # type: ignore[no-untyped-def]
+    """Where the ray ``(o, d)`` (unit ``d``) enters the sphere of ``radius`` around
+    ``pts[k]`` (0 from inside it), or -1 where it misses the sphere, the sphere lies
+    behind the origin, or the entry is surely beyond ``best``."""
+    px, py, pz = pts[k, 0] - o[0], pts[k, 1] - o[1], pts[k, 2] - o[2]
+    t = px * d[0] + py * d[1] + pz * d[2]
+    if t + radius < 0.0 or t - radius > best:
+        return -1.0
+    q2 = px * px + py * py + pz * pz - t * t
+    r2 = radius * radius
+    if q2 > r2:
+        return -1.0
+    half = np.sqrt(r2 - q2)
+    if t + half < 0.0:  # the sphere lies behind the origin
+        return -1.0
+    return max(t - half, 0.0)
 
 
 def _cloud_hits(

@@ -29,6 +29,8 @@ import numpy as np
 from numba import types
 from numba.extending import overload
 
+from ..geometry.raycast import sphere_entry
+
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
 
@@ -205,31 +207,18 @@ def ray_hits_cloud(o, d, grid, oid, limit, bound):  # type: ignore[no-untyped-de
 def _block_hits(o, d, grid, oid, x0, x1, y0, y1, z0, z1, best, which):  # type: ignore[no-untyped-def]
     """:func:`ray_hits_cloud`'s test of the points in the cells ``[x0, x1] x [y0, y1] x
     [z0, z1]`` (clipped to the grid): the nearer ``(best, which)``."""
-    pts, starts, _, dims, params, cum = grid
-    r = params[2]
-    r2 = r * r
+    starts, dims, r, cum = grid[1], grid[3], grid[4][2], grid[5]
     n0, n1, n2 = dims[0], dims[1], dims[2]
     x0, x1, y0, y1, z0, z1 = max(x0, 0), min(x1, n0 - 1), max(y0, 0), min(y1, n1 - 1), max(z0, 0), min(z1, n2 - 1)
     if x0 > x1 or y0 > y1 or z0 > z1 or _count(cum, n1, n2, x0, x1, y0, y1, z0, z1) == 0:
         return best, which
-    d0, d1, d2 = d[0], d[1], d[2]
     for a in range(x0, x1 + 1):
         for b in range(y0, y1 + 1):
             row = (a * n1 + b) * n2
             for t in range(starts[row + z0], starts[row + z1 + 1]):
-                px, py, pz = pts[t, 0] - o[0], pts[t, 1] - o[1], pts[t, 2] - o[2]
-                tt = px * d0 + py * d1 + pz * d2
-                if tt + r < 0.0 or tt - r > best:
-                    continue
-                q2 = px * px + py * py + pz * pz - tt * tt
-                if q2 > r2:
-                    continue
-                half = np.sqrt(r2 - q2)
-                if tt + half < 0.0:  # the sphere lies behind the origin
-                    continue
-                te = tt - half
+                te = sphere_entry(grid[0], t, o, d, r, best)
                 if te < 0.0:
-                    te = 0.0
+                    continue
                 if te < best or (te == best and which >= 0 and oid[t] < oid[which]):
                     best, which = te, t
     return best, which
