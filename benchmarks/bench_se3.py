@@ -69,7 +69,7 @@ def birrt_speed() -> None:
     from pointplan.planners.birrt import BiRRT
     from pointplan.scenes.scenarios import make_scenario
 
-    scenario = make_scenario("slot", robot="sshape")
+    scenario = make_scenario("slotmoving", robot="sshape")
     print(f"\n{'Slot test problem':<18}{'numpy s':>9}{'compiled s':>12}{'ratio':>8}{'nodes':>7}  same result")
     for i in (1, 2, 3):
         problem = scenario.problem("test", i)

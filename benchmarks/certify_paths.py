@@ -39,7 +39,7 @@ from pointplan.scenes.scene import Problem, Scene
 
 Array = NDArray[np.float64]
 
-SCENES_3D = ["boxes3d", "synthetic3d", "ycb3d", "dynamic3d", "slot", "qureshi3d"]
+SCENES_3D = ["boxes3d", "synthetic3d", "ycb3d", "dynamic3d", "slot", "slotmoving", "qureshi3d"]
 #: extrusion of 2D shapes along z (tall enough that the nearest point to a body in the
 #: plane z = 0 is always in that plane)
 _TALL = 10.0

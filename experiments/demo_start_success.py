@@ -21,7 +21,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("checkpoint")
     ap.add_argument("--demos", required=True)
-    ap.add_argument("--env", default="slot")
+    ap.add_argument("--env", default="slotmoving")
     ap.add_argument("--back", nargs="+", type=int, default=[1, 4, 8, 16, 32])
     ap.add_argument("--paths", type=int, default=150)
     ap.add_argument("--greedy-goal", action="store_true")

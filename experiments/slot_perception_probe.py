@@ -109,7 +109,7 @@ class NearGlobal:
 
 
 def collect(split: str, n_scenes: int, per_scene: int, observation: str, args: argparse.Namespace, seed: int) -> dict[str, np.ndarray]:
-    scen = make_scenario("slot", "sshape")
+    scen = make_scenario("slotmoving", "sshape")
     robot = scen.robot
     if observation == "global-near":
         observer = NearGlobal(robot, radius=args.near_radius)

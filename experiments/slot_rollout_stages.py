@@ -34,7 +34,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("checkpoint")
     ap.add_argument("--episodes", type=int, default=50)
-    ap.add_argument("--env", default="slot", choices=["slot", "slotwide", "slotfixed", "slotclassic"])
+    ap.add_argument("--env", default="slotmoving", choices=["slot", "slotmoving", "slotwide", "slotclassic"])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--escape", type=int, default=0, help="the planner's escape steps (default: 0, the mean action alone)")
     ap.add_argument("--pos", type=float, default=0.05, help="metres from the insertion pose that count as reaching it")

@@ -35,7 +35,7 @@ from pointplan.evaluation.evaluate import check_path
 from pointplan.planners import make_planner
 from pointplan.planners.birrt import BiRRT
 from pointplan.scenes.scene import Problem
-from pointplan.scenes.scenes3d import SlotConfig, SlotScenario
+from pointplan.scenes.scenes3d import SlotConfig, SlotMovingScenario
 
 E = np.eye(3)
 
@@ -96,7 +96,7 @@ def main() -> None:
     ap.add_argument("--noise", type=float, default=0.05)
     args = ap.parse_args()
 
-    sc = SlotScenario(config=SlotConfig(min_width_bars=args.min_bars, max_width_bars=args.max_bars))
+    sc = SlotMovingScenario(config=SlotConfig(min_width_bars=args.min_bars, max_width_bars=args.max_bars))
     robot = sc.robot
     problems = sc.problems("train", args.problems, seed=args.seed)
     if args.expert == "ompl":

@@ -9,7 +9,7 @@ taken at its state nearest (in position) to the template's insertion pose on tha
 the world-frame turn from the insertion pose to it is sorted by its angle and by its axis
 (within 30 degrees of the wall's normal, x, or not).
 
-    python experiments/slot_turn_errors.py src/pointplan/data/slot_sshape_local_policy.pt --demos runs/demos_slot_canonical.npz --back 32 40 48 56
+    python experiments/slot_turn_errors.py src/pointplan/data/slotmoving_sshape_local_policy.pt --demos runs/demos_slot_canonical.npz --back 32 40 48 56
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("checkpoint")
     ap.add_argument("--demos", required=True)
-    ap.add_argument("--env", default="slot", choices=["slot", "slotwide", "slotfixed", "slotclassic"])
+    ap.add_argument("--env", default="slotmoving", choices=["slot", "slotmoving", "slotwide", "slotclassic"])
     ap.add_argument("--back", nargs="+", type=int, default=[32, 40, 48, 56])
     ap.add_argument("--paths", type=int, default=100, help="the last this many demonstrations of the file")
     ap.add_argument("--json")

@@ -26,7 +26,7 @@ def _probe_module():  # type: ignore[no-untyped-def]
 
 def test_rays_through_the_opening_agree_with_the_ray_caster() -> None:
     probe = _probe_module()
-    scen = make_scenario("slot", "sshape")
+    scen = make_scenario("slotmoving", "sshape")
     robot = scen.robot
     observer = make_observer("local", robot, max_range=2.0)
     rng = np.random.default_rng(3)

@@ -125,9 +125,9 @@ def sweep_problems(args: argparse.Namespace) -> None:
     from pointplan.evaluation.evaluate import check_path, timed_path
     from pointplan.planners.slot_sweep import plan
     from pointplan.robots.sshape import BAR_THICKNESS
-    from pointplan.scenes.scenes3d import SlotConfig, SlotScenario
+    from pointplan.scenes.scenes3d import SlotConfig, SlotMovingScenario
 
-    sc = SlotScenario(config=SlotConfig(min_width_bars=args.min_bars, max_width_bars=args.max_bars))
+    sc = SlotMovingScenario(config=SlotConfig(min_width_bars=args.min_bars, max_width_bars=args.max_bars))
     robot = sc.robot
     chosen = range(args.problems) if args.only is None else [i for i in range(args.problems) if i in args.only]
     solved = 0
@@ -194,7 +194,7 @@ def parser() -> argparse.ArgumentParser:
     d = sub.add_parser("demos", help="the threading expert's demonstrations of training problems")
     d.add_argument("--save-demos", required=True, help="the demonstrations file (read first: its problems are skipped)")
     d.add_argument("--template", help="a template file (default: the shipped one, pointplan/data/slot_threading.npz)")
-    d.add_argument("--env", default="slot", choices=["slot", "slotwide", "slotfixed", "slotclassic"])
+    d.add_argument("--env", default="slot", choices=["slot", "slotmoving", "slotwide", "slotclassic"])
     d.add_argument("--problems", type=int, default=3000)
     d.add_argument("--first", type=int, default=0)
     d.add_argument("--seed", type=int, default=0)

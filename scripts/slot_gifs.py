@@ -8,7 +8,7 @@ template's approach pose (0.3 before the wall, turned for the threading; the tit
 so), as ``experiments/slot_rollout_stages.py --from-approach`` does. Every drawn path is
 certified by the evaluator's ``check_path``.
 
-    python scripts/slot_gifs.py src/pointplan/data/slot_sshape_local_policy.pt -o docs/img/slot_policy
+    python scripts/slot_gifs.py src/pointplan/data/slotmoving_sshape_local_policy.pt --env slotmoving -o docs/img/slot_policy
     python scripts/slot_gifs.py checkpoints/slotclassic_local_ppo_best.pt --env slotclassic -o docs/img/slotclassic_policy
 """
 
@@ -52,7 +52,7 @@ def main() -> None:
     ap.add_argument("--escape", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument(
-        "--env", default="slot", choices=["slot", "slotfixed", "slotclassic"], help="the Slot scene (default: slot)"
+        "--env", default="slot", choices=["slot", "slotmoving", "slotclassic"], help="the Slot scene (default: slot)"
     )
     args = ap.parse_args()
     torch.set_num_threads(1)

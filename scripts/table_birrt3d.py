@@ -11,7 +11,7 @@ import argparse
 import json
 from pathlib import Path
 
-ORDER = ["boxes3d", "synthetic3d", "ycb3d", "dynamic3d", "slot", "qureshi3d"]
+ORDER = ["boxes3d", "synthetic3d", "ycb3d", "dynamic3d", "slot", "slotmoving", "qureshi3d"]
 
 
 def table(paths: list[str]) -> str:

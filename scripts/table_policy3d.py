@@ -37,7 +37,8 @@ PAPER = {
     "sshape": {
         "global": {"boxes3d": 89.0, "synthetic3d": 85.3, "ycb3d": 88.7, "dynamic3d": 86.0},
         # Slot (section 4.4): a `local` policy trained on Slot itself (--checkpoint-local)
-        # slotclassic (our diagnostic reading of Slot: centred opening, one goal) shows the same 97.7
+        # slot: the gate fixed at the wall's centre, its width random (the paper's reading);
+        # slotclassic (our diagnostic: the same with one goal) shows the same 97.7
         "local": {
             "boxes3d": 97.0,
             "synthetic3d": 87.3,
@@ -48,9 +49,12 @@ PAPER = {
         },
     },
 }
+#: scenes run and tabled though the paper has no number for them: the moving-gate Slot
+#: (a harder variant of our own)
+NO_PAPER = {"sshape": {"local": {"slotmoving"}}}
 SCENES = ["boxes3d", "synthetic3d", "ycb3d", "dynamic3d", "qureshi3d"]
-#: the table's scenes: Slot's cells are run only when asked (--scenes slot), with a Slot policy
-TABLE_SCENES = [*SCENES, "slot", "slotclassic"]
+#: the table's scenes: Slot's cells are run only when asked (--scenes slot ...), with a Slot policy
+TABLE_SCENES = [*SCENES, "slot", "slotmoving", "slotclassic"]
 OUT = Path("docs/data/policy3d")
 
 
@@ -65,7 +69,8 @@ def run(args: argparse.Namespace) -> None:
         for planner_name in args.planners:
             if planner_name.startswith("policy-"):
                 obs = planner_name.split("-", 1)[1]
-                if obs not in PAPER[args.robot] or scene not in PAPER[args.robot][obs]:
+                extra = NO_PAPER.get(args.robot, {}).get(obs, set())
+                if scene not in PAPER[args.robot].get(obs, {}) and scene not in extra:
                     continue
                 if args.attempts > 1 and scenario.scene("test", 0).dynamic:
                     continue
@@ -132,12 +137,13 @@ def main() -> None:
         "--scenes",
         nargs="+",
         default=SCENES,
-        help="default: all but slot and slotclassic, which take a policy of their own (slot: the shipped one; slotclassic: --checkpoint-local)",
+        help="default: all but slot, slotmoving and slotclassic, which take a policy of their own (slotmoving: the shipped one; slot and slotclassic: --checkpoint-local)",
     )
     ap.add_argument("--planners", nargs="+", default=["policy-global", "policy-local", "birrt"])
     ap.add_argument("--checkpoint-global", help="policy on global points (default: the shipped one)")
     ap.add_argument(
-        "--checkpoint-local", help="policy on ray-cast points (default: the shipped one, Slot's own in slot)"
+        "--checkpoint-local",
+        help="policy on ray-cast points (default: the shipped one, the moving-gate Slot's own in slotmoving)",
     )
     ap.add_argument(
         "--attempts",

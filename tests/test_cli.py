@@ -553,12 +553,12 @@ def test_eval_attempts_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
 
 
 def test_eval_says_which_shipped_policy_it_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """Without --checkpoint, eval names the shipped policy: Slot's own in Slot, 3D-Boxes' in
+    """Without --checkpoint, eval names the shipped policy: the moving-gate Slot's own there, 3D-Boxes' in
     the other 3D scenes; with --checkpoint or --quiet it says nothing of the kind."""
     out = tmp_path / "m.json"
-    assert main(["eval", "--env", "slot", "--planner", "policy", "--episodes", "1", "--json", str(out)]) == 0
+    assert main(["eval", "--env", "slotmoving", "--planner", "policy", "--episodes", "1", "--json", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "the shipped policy slot_sshape_local_policy.pt (trained in slot, local observations)" in text
+    assert "the shipped policy slotmoving_sshape_local_policy.pt (trained in slotmoving, local observations)" in text
     assert (
         main(
             [

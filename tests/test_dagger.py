@@ -88,7 +88,7 @@ def test_dagger_with_the_slot_threading_expert_plans_its_own_demos_and_labels(tm
     from pointplan.scenes.scene import Problem
 
     bc = BCConfig(
-        env="slot",
+        env="slotmoving",
         robot="sshape",
         observation="global",
         n_points=32,
@@ -101,7 +101,7 @@ def test_dagger_with_the_slot_threading_expert_plans_its_own_demos_and_labels(tm
         bc, rounds=1, rollouts=2, labels_per_failure=2, epochs_per_round=1, eval_episodes=2, expert=expert
     )
     train_dagger(cfg, tmp_path, progress=False)
-    sc = make_scenario("slot", robot="sshape")
+    sc = make_scenario("slotmoving", robot="sshape")
     demos = load_demos(tmp_path / "demos.npz", sc)
     rows = (tmp_path / "metrics.csv").read_text().splitlines()
     labels = int(rows[1].split(",")[3])
@@ -113,3 +113,50 @@ def test_dagger_with_the_slot_threading_expert_plans_its_own_demos_and_labels(tm
         from_starts += bool(np.allclose(path[0], p.start))
         assert check_path(sc.robot, Problem(p.scene, path[0], p.goal), path)
     assert from_starts < len(demos.paths)  # the labels start elsewhere
+
+
+def test_dagger_with_the_roadmap_expert(tmp_path: Path) -> None:
+    """``expert="roadmap"``: the first demonstrations and the labels come from the roadmap
+    expert; every path is certified, the labels start where the policy was, and a state's
+    label is the one the roadmap of its workspace gives (``label_states``)."""
+    from pointplan.evaluation.evaluate import check_path
+    from pointplan.learning.roadmap import label_states
+    from pointplan.scenes.scene import Problem
+
+    bc = BCConfig(
+        env="boxes3d",
+        robot="sshape",
+        observation="global",
+        n_points=32,
+        n_problems=2,
+        epochs=1,
+        net=SMALL,
+        refresh_every=0,
+    )
+    cfg = DaggerConfig(
+        bc,
+        rounds=1,
+        rollouts=3,
+        labels_per_failure=2,
+        epochs_per_round=1,
+        eval_episodes=2,
+        expert="roadmap",
+        roadmap_nodes=300,
+        roadmap_k=8,
+    )
+    train_dagger(cfg, tmp_path, progress=False)
+    sc = make_scenario("boxes3d", robot="sshape")
+    demos = load_demos(tmp_path / "demos.npz", sc)
+    rows = (tmp_path / "metrics.csv").read_text().splitlines()
+    labels = int(rows[1].split(",")[3])
+    assert labels > 0  # a policy cloned from two problems fails 3D-Boxes
+    first = [(k, path) for k, path in demos.paths if k < 2_000_000]
+    assert len(first) > 2  # the starts' paths and paths from roadmap nodes
+    relabelled = 0
+    for k, path in demos.paths:
+        p = sc.problem("train", k, seed=0)
+        assert check_path(sc.robot, Problem(p.scene, path[0], p.goal), path)
+        if k >= 2_000_000:
+            again = label_states(sc, "train", 0, k, [path[0]], 300, 8, rng_seed=0)
+            relabelled += len(again) == 1 and np.array_equal(again[0], path)
+    assert relabelled == labels

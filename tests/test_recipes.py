@@ -37,7 +37,7 @@ CLONES = {
     ("sshape_local_policy", 0): "sshape_local_bc.pt",
     ("sshape_local_policy", 1): "sshape_local_bc_spread.pt",
     ("sshape_global_policy", 1): "sshape_global_bc.pt",
-    ("slot_sshape_local_policy", 1): "slot_local_bc_threading.pt",
+    ("slotmoving_sshape_local_policy", 1): "slotmoving_local_bc_threading.pt",
 }
 
 

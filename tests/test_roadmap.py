@@ -160,3 +160,28 @@ def test_lookahead_paths_keep_one_label_per_state(setup: tuple) -> None:
     # a new search of the same roadmap gives the same lookahead paths
     b = roadmap_paths(robot, rm, p, 3, K, np.random.default_rng(9), ahead=True)
     assert b.start is not None and np.array_equal(a.start, b.start)
+
+
+def test_state_labels_are_certified_and_a_function_of_the_state() -> None:
+    """``label_states`` (DAgger's roadmap expert): a state's label is its path to the goal
+    in policy steps, accepted by the evaluator, and the same whichever other states are
+    labelled with it (one roadmap per workspace, drawn from the problem's index)."""
+    from pointplan.learning.roadmap import label_states
+
+    sc = make_scenario("boxes3d", robot="sshape")
+    p = sc.problem("train", INDEX, seed=0)
+    robot = sc.robot
+    states = list(robot.sample_free(p.scene.world, np.random.default_rng(11), 4, p.scene.low, p.scene.high))
+    states.insert(0, p.start)
+    both = label_states(sc, "train", 0, INDEX, states, NODES, K, rng_seed=3)
+    assert len(both) >= 3  # most free states of this workspace join a 300-node roadmap
+    for path in both:
+        assert check_path(robot, Problem(p.scene, path[0], p.goal), path)
+        steps = robot.log(path[:-1], path[1:]) / robot.action_scale
+        assert np.abs(steps).max() <= 1 + 1e-9
+    alone = label_states(sc, "train", 0, INDEX, [p.start], NODES, K, rng_seed=3)
+    assert len(alone) == 1 and np.allclose(alone[0][0], p.start)
+    assert np.array_equal(alone[0], both[0])
+    # another roadmap (seed) may label the same state differently, but still certified
+    other = label_states(sc, "train", 0, INDEX, [p.start], NODES, K, rng_seed=4)
+    assert len(other) == 1 and check_path(robot, p, other[0])

@@ -22,7 +22,7 @@ from pointplan.robots import make_robot
 from pointplan.scenes.registry import SCENARIOS_3D
 from pointplan.scenes.scenarios import make_scenario
 from pointplan.scenes.scene import DynamicScene
-from pointplan.scenes.scenes3d import SlotConfig, SlotScenario
+from pointplan.scenes.scenes3d import SlotConfig, SlotMovingScenario, SlotScenario
 
 #: 3D-YCB loads and decimates meshes: its cases are slow
 SCENES = [pytest.param(s, marks=pytest.mark.slow) if s == "ycb3d" else s for s in SCENARIOS_3D]
@@ -111,7 +111,7 @@ def test_synthetic_shapes_are_never_boxes() -> None:
 
 
 def test_slot_width_and_sides() -> None:
-    sc = SlotScenario()
+    sc = SlotMovingScenario()
     assert sc.robot.name == "sshape"
     widths = []
     for i in range(30):
@@ -130,8 +130,38 @@ def test_slot_width_and_sides() -> None:
         assert p.start[0] <= -0.3 and p.goal[0] >= 0.3
 
 
+def test_the_paper_slot_has_the_gate_fixed_and_keeps_its_problems_across_the_rename() -> None:
+    """``slot`` (the paper's reading): the opening centred, long along y, only its width
+    random, start and goal on opposite sides; its problems are the ones drawn under its
+    former name (``slotfixed``), and ``slotmoving``'s those drawn as ``slot``."""
+    sc = SlotScenario()
+    assert sc.name == "slot" and sc.robot.name == "sshape"
+    widths = []
+    for i in range(20):
+        slot = sc.scene("test", i).__dict__["slot"]
+        assert np.array_equal(slot["center"], np.zeros(3)) and slot["long_axis"] == 1
+        widths.append(slot["width"])
+    assert min(widths) >= 2 * 0.036 and max(widths) <= 8 * 0.036 and max(widths) - min(widths) > 3 * 0.036
+    for p in sc.problems("test", 4):
+        assert p.start[0] <= -0.3 and p.goal[0] >= 0.3
+
+    # the other Slot variants keep streams of their own names
+    assert [make_scenario(n).stream_name for n in ("slotwide", "slotclassic")] == ["slotwide", "slotclassic"]
+
+    class Former(SlotMovingScenario):
+        stream = None  # seeded from its name, as before the rename
+
+    for former, now in (("slotfixed", sc), ("slot", make_scenario("slotmoving"))):
+        old = Former(config=now.slot)
+        old.name = former
+        for i in range(3):
+            a, b = old.problem("val", i, seed=1), now.problem("val", i, seed=1)
+            assert np.array_equal(a.start, b.start) and np.array_equal(a.goal, b.goal)
+            assert a.scene.__dict__["slot"]["width"] == b.scene.__dict__["slot"]["width"]
+
+
 def test_slotwide_draws_only_wide_slots_from_its_own_workspaces() -> None:
-    wide, slot = make_scenario("slotwide"), make_scenario("slot")
+    wide, slot = make_scenario("slotwide"), make_scenario("slotmoving")
     assert wide.robot.name == "sshape"
     widths = [wide.scene("train", i).__dict__["slot"]["width"] for i in range(40)]
     assert min(widths) >= 4 * 0.036 and max(widths) <= 8 * 0.036
@@ -278,7 +308,7 @@ def test_birrt_solves_fixed_problems_and_paths_pass_the_check(name: str) -> None
     for robot in robots:
         # Slot: the widest slot (8 bars) keeps the test fast; narrow ones take 1e4+ nodes
         sc = (
-            SlotScenario(config=SlotConfig(min_width_bars=8, max_width_bars=8))
+            SlotMovingScenario(config=SlotConfig(min_width_bars=8, max_width_bars=8))
             if name.startswith("slot")
             else make_scenario(name, robot=robot)
         )

@@ -64,20 +64,22 @@ def test_a_combination_that_does_not_ship_names_what_does() -> None:
         make_planner("policy", make_scenario("boxes3d", robot="sphere3d").robot, observation="interior")
 
 
-def test_slot_takes_the_policy_trained_on_slot_and_other_scenes_the_boxes_ones() -> None:
-    """``scene="slot"`` (the CLI passes ``--env``) selects the S-shape policy trained on Slot;
-    other scenes, other observations and other robots keep the 3D-Boxes policies."""
+def test_slotmoving_takes_the_policy_trained_there_and_other_scenes_the_boxes_ones() -> None:
+    """``scene="slotmoving"`` (the CLI passes ``--env``) selects the S-shape policy trained
+    on the moving-gate Slot; other scenes (the paper's ``slot`` among them), other
+    observations and other robots keep the 3D-Boxes policies."""
     from pointplan.models.checkpoint import load_checkpoint
 
-    slot = shipped_checkpoint("sshape", None, "slot")
-    assert slot.name == "slot_sshape_local_policy.pt" and slot.stat().st_size < 500_000
+    slot = shipped_checkpoint("sshape", None, "slotmoving")
+    assert slot.name == "slotmoving_sshape_local_policy.pt" and slot.stat().st_size < 500_000
     meta = load_checkpoint(slot)
-    assert (meta["env"], meta["robot"], meta["observation"]) == ("slot", "sshape", "local")
-    assert shipped_checkpoint("sshape", "local", "slot") == slot
-    assert shipped_checkpoint("sshape", "global", "slot") == shipped_checkpoint("sshape", "global")
+    assert (meta["env"], meta["robot"], meta["observation"]) == ("slotmoving", "sshape", "local")
+    assert shipped_checkpoint("sshape", "local", "slotmoving") == slot
+    assert shipped_checkpoint("sshape", "global", "slotmoving") == shipped_checkpoint("sshape", "global")
     assert shipped_checkpoint("sshape", None, "boxes3d") == shipped_checkpoint("sshape") != slot
-    assert shipped_checkpoint("sphere3d", None, "slot") == shipped_checkpoint("sphere3d")
-    robot = make_scenario("slot").robot
-    assert make_planner("policy", robot, scene="slot").policy.meta["env"] == "slot"
-    assert make_planner("hybrid", robot, scene="slot", max_nodes=10).policy.policy.meta["env"] == "slot"
+    assert shipped_checkpoint("sshape", None, "slot") == shipped_checkpoint("sshape")
+    assert shipped_checkpoint("sphere3d", None, "slotmoving") == shipped_checkpoint("sphere3d")
+    robot = make_scenario("slotmoving").robot
+    assert make_planner("policy", robot, scene="slotmoving").policy.meta["env"] == "slotmoving"
+    assert make_planner("hybrid", robot, scene="slotmoving", max_nodes=10).policy.policy.meta["env"] == "slotmoving"
     assert make_planner("policy", robot, scene="boxes3d").policy.meta["env"] == "boxes3d"

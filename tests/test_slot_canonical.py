@@ -42,7 +42,7 @@ def _coal_min_clearance(robot, problem: Problem, path: np.ndarray) -> float:  # 
 
 
 def test_template_threads_moved_turned_and_wider_slots_but_not_a_narrower_one() -> None:
-    sc = make_scenario("slot", "sshape")
+    sc = make_scenario("slotmoving", "sshape")
     robot = sc.robot
     expert = SlotThreading.load(robot)
     w0 = expert.width_bars
@@ -74,7 +74,7 @@ def test_the_symmetric_copies_thread_the_slot_and_the_nearest_one_is_taken() -> 
 
     from pointplan.planners.slot_threading import SYMMETRIES
 
-    robot = make_scenario("slot", "sshape").robot
+    robot = make_scenario("slotmoving", "sshape").robot
     expert = SlotThreading.load(robot, copies=True)
     rng = np.random.default_rng(5)
     for long_axis in (1, 2):
@@ -109,7 +109,7 @@ def _wall(width: float, mid: np.ndarray, long_axis: int):  # type: ignore[no-unt
 
 
 def test_wall_matches_the_scenario_and_refuses_a_bad_axis() -> None:
-    sc = make_scenario("slot", "sshape")
+    sc = make_scenario("slotmoving", "sshape")
     p = sc.problem("val", 2, seed=0)
     slot = p.scene.__dict__["slot"]
     again = _wall(slot["width"], slot["center"], slot["long_axis"])
@@ -153,7 +153,7 @@ def test_the_shipped_template_is_what_the_builder_writes() -> None:
         assert sorted(z.files) == ["clearance", "order", "poses", "seed", "width_bars"]
         poses, width, clearance = np.array(z["poses"]), float(z["width_bars"]), float(z["clearance"])
         assert str(z["order"]) in ("A", "E") and z["seed"].dtype == np.int64
-    robot = make_scenario("slot", "sshape").robot
+    robot = make_scenario("slotmoving", "sshape").robot
     problem = reference_problem(width)
     ok = check_path(robot, Problem(problem.scene, poses[0], poses[-1]), poses)
     assert ok and np.isclose(ok.clearance, clearance, rtol=1e-9, atol=0)
@@ -191,7 +191,7 @@ def test_a_small_template_build_gives_a_file_like_the_shipped_one(tmp_path) -> N
         for k in shipped.files:
             assert new[k].dtype == shipped[k].dtype and new[k].ndim == shipped[k].ndim
         assert new["poses"].shape[1] == 7 and float(new["width_bars"]) == 6.0 and float(new["clearance"]) > 0
-    robot = make_scenario("slot", "sshape").robot
+    robot = make_scenario("slotmoving", "sshape").robot
     expert = SlotThreading.load(robot, out)
     scene = _wall(6.5 * BAR_THICKNESS, np.array([0.0, 0.1, -0.05]), 2)
     path = expert.place(scene.__dict__["slot"])
@@ -215,7 +215,7 @@ def test_rebuilding_the_shipped_template_gives_the_same_file(tmp_path) -> None: 
 def test_labels_from_states_inside_the_slot_go_on_from_there() -> None:
     """A DAgger label from a pose halfway through the slot joins the template there (it does
     not back out to the approach), and is free to the goal."""
-    sc = make_scenario("slot", "sshape")
+    sc = make_scenario("slotmoving", "sshape")
     expert = SlotThreading.load(sc.robot)
     k = next(
         k for k in range(1_000_000, 1_000_050) if expert.threads(sc.problem("train", k, seed=0).scene.__dict__["slot"])
@@ -235,16 +235,17 @@ def test_labels_from_states_inside_the_slot_go_on_from_there() -> None:
         expert.plan(other)
 
 
-def test_slotfixed_keeps_the_opening_centred_and_long_along_y_and_slot_is_unchanged() -> None:
-    fixed = make_scenario("slotfixed", "sshape")
+def test_slot_keeps_the_opening_centred_and_long_along_y_and_slotmoving_is_unchanged() -> None:
+    fixed = make_scenario("slot", "sshape")
     widths = []
     for p in fixed.problems("val", 8, seed=0):
         slot = p.scene.__dict__["slot"]
         assert slot["long_axis"] == 1 and np.allclose(slot["center"], 0.0)
         widths.append(slot["width"] / BAR_THICKNESS)
     assert 2.0 <= min(widths) < max(widths) <= 8.0
-    # Slot's own draws did not move when the variant was added (values from before it)
-    slot = make_scenario("slot", "sshape").problem("val", 3, seed=0).scene.__dict__["slot"]
+    # the moving gate's draws did not move when the fixed one was added, nor when the two
+    # were renamed (values from before both, when the moving gate was named slot)
+    slot = make_scenario("slotmoving", "sshape").problem("val", 3, seed=0).scene.__dict__["slot"]
     assert slot["long_axis"] == 1
     assert np.isclose(slot["width"], 0.21244264810153043)
     assert np.allclose(slot["center"], [0.0, 0.04448986, -0.14577895])

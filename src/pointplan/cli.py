@@ -1067,6 +1067,8 @@ BC_OPTIONS = {
     "expert-attempts": "bc.expert_attempts",
     "expert-margin": "bc.expert_margin",
     "expert": "expert",
+    "roadmap-nodes": "roadmap_nodes",
+    "roadmap-k": "roadmap_k",
 }
 
 
@@ -1088,8 +1090,8 @@ def cmd_bc(args: argparse.Namespace) -> int:
         summary = train_dagger(
             cfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume, pool=pool
         )
-    elif cfg.expert.startswith("slot-threading") and not cloning:
-        summary = _bc_slot_threading(cfg, run_dir, not args.quiet)
+    elif cfg.expert != "birrt" and not cloning:
+        summary = _bc_own_expert(cfg, run_dir, not args.quiet)
     else:
         resume = args.resume if cloning else None
         summary = train_bc(
@@ -1128,9 +1130,10 @@ def _bc_resume_config(args: argparse.Namespace, given: dict[str, Any]) -> tuple[
     return cfg, False
 
 
-def _bc_slot_threading(cfg: DaggerConfig, run_dir: str, progress: bool) -> dict[str, Any]:
-    """Cloning from demonstrations of the slot threading expert (planned here, kept in
-    ``--demos`` or the run folder's ``demos.npz``)."""
+def _bc_own_expert(cfg: DaggerConfig, run_dir: str, progress: bool) -> dict[str, Any]:
+    """Cloning from demonstrations of ``--expert`` (the slot threading or the roadmap
+    expert; planned here in this process, kept in ``--demos`` or the run folder's
+    ``demos.npz``)."""
     from .learning.bc import train_bc
     from .learning.dagger import first_demos
     from .learning.rundir import say_interrupted_early

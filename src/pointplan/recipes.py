@@ -299,26 +299,27 @@ RECIPES: dict[str, Recipe] = {
             cost="about 1.6 hours: demonstrations 23 minutes on 2 workers, cloning about 23, PPO 50 (one core); the 8-epoch clone that plans them not timed",
         ),
         Recipe(
-            name="slot_sshape_local_policy",
-            shipped="slot_sshape_local_policy.pt",
-            title="the S-shape's local policy in Slot: the threading expert's demonstrations, cloning, then PPO on a reverse curriculum",
+            name="slotmoving_sshape_local_policy",
+            shipped="slotmoving_sshape_local_policy.pt",
+            title="the S-shape's local policy in the moving-gate Slot (slotmoving): the threading expert's demonstrations, cloning, then PPO on a reverse curriculum",
             description=(
-                "The slot threading expert's demonstrations of 3,000 Slot training problems (2,927 threaded: scripts/slot_expert.py demos with the "
-                "shipped template), the local clone with its spread (40 epochs, separate encoders: checkpoints/slot_local_bc_threading.pt), then PPO "
+                "The slot threading expert's demonstrations of 3,000 moving-gate Slot training problems (2,927 threaded: scripts/slot_expert.py demos with the "
+                "shipped template), the local clone with its spread (40 epochs, separate encoders: checkpoints/slotmoving_local_bc_threading.pt), then PPO "
                 "with the reverse curriculum and the greedy goal test (docs/guide/training.md, 'A reverse curriculum'; docs/notebook/slot.md; "
                 "checkpoints/README.md). The shipped file is the curriculum's best by validation with the escape, at 307,200 steps. The clone's "
                 "command (--problems 2927, as its bc_config says) is the one of the earlier docs/learning.md (git show 9dc8483^:docs/learning.md); "
                 "the current docs give its settings in words. The curriculum run (ppo_config: --steps 20000000) went on to 860,160 steps without a "
-                "better validation; its branch with --lr 3e-5 from 307,200 steps is checkpoints/slot_local_ppo_curriculum_last.pt. Here --steps "
-                "stops it at the shipped step."
+                "better validation; its branch with --lr 3e-5 from 307,200 steps is checkpoints/slotmoving_local_ppo_curriculum_last.pt. Here --steps "
+                "stops it at the shipped step. The scene was named slot then (slotmoving since the paper's reading, the fixed gate, took the name); "
+                "its problems are the same."
             ),
             steps=(
                 _step(
-                    "python scripts/slot_expert.py demos --save-demos {root}/demos_slot_canonical.npz --problems {3000|6}",
-                    "the threading expert's demonstrations of 3,000 Slot training problems (slots narrower than the template are left out)",
+                    "python scripts/slot_expert.py demos --env slotmoving --save-demos {root}/demos_slot_canonical.npz --problems {3000|6}",
+                    "the threading expert's demonstrations of 3,000 moving-gate Slot training problems (slots narrower than the template are left out)",
                 ),
                 _step(
-                    "pointplan bc --env slot --robot sshape --observation local --encoder-sharing separate --problems 2927 --epochs {40|1} "
+                    "pointplan bc --env slotmoving --robot sshape --observation local --encoder-sharing separate --problems 2927 --epochs {40|1} "
                     "--spread-weight 1 --demos {root}/demos_slot_canonical.npz --run-dir {root}/canon/bc_local",
                     "the clone with its spread: 40 epochs",
                     "--eval-episodes 2",

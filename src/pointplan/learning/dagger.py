@@ -70,8 +70,17 @@ class DaggerConfig:
     #: (Slot scenes only: one threading of every slot, :mod:`pointplan.planners.slot_threading`;
     #: it also plans the first demonstrations when there is no demonstrations file), or
     #: ``slot-threading-copies`` (the same with the template's symmetric copies, the one
-    #: turned least from the robot: ``SlotThreading(copies=True)``)
-    expert: str = field(default="birrt", metadata={"choices": ("birrt", "slot-threading", "slot-threading-copies")})
+    #: turned least from the robot: ``SlotThreading(copies=True)``), or ``roadmap`` (the
+    #: roadmap expert, :mod:`pointplan.learning.roadmap`: one roadmap per rolled-out
+    #: workspace, searched once from its goal, so every state gets one label, with the
+    #: lookahead of ``scripts/roadmap_demos.py --lookahead``)
+    expert: str = field(
+        default="birrt", metadata={"choices": ("birrt", "slot-threading", "slot-threading-copies", "roadmap")}
+    )
+    #: ``expert roadmap``: nodes of each workspace's roadmap
+    roadmap_nodes: int = field(default=2000, metadata={"min": 2})
+    #: ``expert roadmap``: nearest nodes each node (and each labelled state) is joined to
+    roadmap_k: int = field(default=15, metadata={"min": 1})
 
 
 def _rollout_index(seed: int, rnd: int, rollouts: int, i: int) -> int:
@@ -143,6 +152,60 @@ def _threading_labels(
     return out
 
 
+def _roadmap_labels(
+    cfg: DaggerConfig, scenario: Scenario, jobs: Sequence[DemoJob], progress: bool, desc: str
+) -> list[tuple[int, np.ndarray]]:
+    """The roadmap expert's paths from the states of ``jobs`` (grouped by problem: one
+    roadmap and one search per workspace), cut into policy steps."""
+    from .roadmap import label_states
+
+    by_problem: dict[int, list[np.ndarray]] = {}
+    for job in jobs:
+        by_problem.setdefault(int(job[3]), []).append(np.asarray(job[7], np.float64))
+    items = list(by_problem.items())
+    if progress:
+        from tqdm import tqdm
+
+        items = tqdm(items, desc=desc, unit="workspace")
+    out: list[tuple[int, np.ndarray]] = []
+    for index, states in items:
+        paths = label_states(
+            scenario, "train", cfg.bc.seed, index, states, cfg.roadmap_nodes, cfg.roadmap_k, rng_seed=cfg.bc.seed
+        )
+        out.extend((index, path) for path in paths)
+    return out
+
+
+def _roadmap_demos(cfg: DaggerConfig, scenario: Scenario, progress: bool) -> Demos:
+    """The roadmap expert's demonstrations of the cloning problems (those Bi-RRT would
+    plan), as ``scripts/roadmap_demos.py --lookahead`` builds them (20 paths from roadmap
+    nodes per problem besides the start's)."""
+    from .roadmap import demo_problem_indices, roadmap_demos
+
+    b = cfg.bc
+    indices = demo_problem_indices(b.seed, b.n_problems)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(indices), desc="roadmap demonstrations", unit="problem")
+    paths = roadmap_demos(
+        scenario,
+        "train",
+        b.seed,
+        indices,
+        cfg.roadmap_nodes,
+        cfg.roadmap_k,
+        20,
+        rng_seed=b.seed,
+        ahead=True,
+        on_problem=(lambda *_: bar.update()) if bar is not None else None,
+    )
+    if bar is not None:
+        bar.close()
+    return demos_from_paths(scenario, "train", b.seed, paths)
+
+
 def first_demos(
     cfg: DaggerConfig, scenario: Scenario, demos_path: Path, progress: bool, pool: DemoPool | None = None
 ) -> Demos:
@@ -160,6 +223,8 @@ def first_demos(
             scenario, jobs, progress, "demonstrations", copies=cfg.expert == "slot-threading-copies"
         )
         demos = demos_from_paths(scenario, "train", b.seed, paths)
+    elif cfg.expert == "roadmap":
+        demos = _roadmap_demos(cfg, scenario, progress)
     else:
         demos = generate_demos(
             scenario, b.n_problems, b.seed, progress=progress, workers=b.workers, address=b.address, pool=pool
@@ -193,6 +258,8 @@ def _roll_out_and_label(
         return results, _threading_labels(
             scenario, labels, progress, f"round {rnd + 1}: expert labels", copies=cfg.expert == "slot-threading-copies"
         )
+    if cfg.expert == "roadmap":
+        return results, _roadmap_labels(cfg, scenario, jobs, progress, f"round {rnd + 1}: roadmap labels")
     return results, plan_demos(jobs, pool, progress, desc=f"round {rnd + 1}: expert labels")
 
 

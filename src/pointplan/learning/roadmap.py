@@ -398,6 +398,35 @@ def roadmap_demos(
     return out
 
 
+def label_states(
+    scenario: Scenario,
+    split: str,
+    seed: int,
+    index: int,
+    states: Sequence[Array],
+    n_nodes: int,
+    k: int,
+    rng_seed: int = 0,
+    ahead: bool = True,
+) -> list[Array]:
+    """The roadmap expert's paths, in policy steps, from configurations ``states`` (for
+    example those a policy visited) to the goal of problem ``index`` of ``split``: the
+    workspace's roadmap is drawn as :func:`problem_paths` draws it (from ``(rng_seed,
+    index)``), searched once from the goal, and every state joins it by
+    :func:`start_path`. States that do not join the roadmap (or whose goal does not) are
+    left out, so the list may be shorter than ``states``."""
+    p = scenario.problem(split, index, seed=seed)
+    rng = np.random.default_rng([int(rng_seed), int(index)])
+    rm = build_roadmap(scenario.robot, p.scene, n_nodes, k, rng)
+    tree = goal_tree(rm, scenario.robot, p.scene, p.goal, k)
+    out = []
+    for q in states:
+        raw = start_path(tree, q, k, ahead)
+        if raw is not None and len(raw) > 1:
+            out.append(resample_path(scenario.robot, raw))
+    return out
+
+
 # ---------------------------------------------------------------------- measurement
 def _unit(v: Array) -> Array | None:
     norm = float(np.linalg.norm(v))

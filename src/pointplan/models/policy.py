@@ -215,10 +215,10 @@ SHIPPED: dict[tuple[str, str], str] = {
     ("sshape", "global"): "sshape_global_policy.pt",
 }
 #: policies trained for one scene, taken there before the 3D-Boxes ones: (robot,
-#: observation, scenario) -> file in ``pointplan/data``. Slot's is the paper's Slot policy
-#: (trained on Slot; docs/results/README.md, "Slot").
+#: observation, scenario) -> file in ``pointplan/data``: the moving-gate Slot's (trained
+#: there; docs/results/slot.md).
 SHIPPED_FOR_SCENE: dict[tuple[str, str, str], str] = {
-    ("sshape", "local", "slot"): "slot_sshape_local_policy.pt",
+    ("sshape", "local", "slotmoving"): "slotmoving_sshape_local_policy.pt",
 }
 #: the observation a robot's policy uses when none is asked for (the better of the two on
 #: the validation problems where both ship; docs/results/README.md)

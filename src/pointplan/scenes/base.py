@@ -22,6 +22,14 @@ class Scenario(ABC):
     name: str
     robot: Robot
     horizon: int
+    #: the name the random streams of workspaces and problems are drawn from, when it is
+    #: not ``name`` (a scenario renamed keeps its problems)
+    stream: str | None = None
+
+    @property
+    def stream_name(self) -> str:
+        """The name seeding this scenario's random streams (``stream``, else ``name``)."""
+        return self.stream or self.name
 
     @abstractmethod
     def scene(self, split: str, index: int) -> Scene:
@@ -44,7 +52,7 @@ class Scenario(ABC):
         ``(split, index, seed)``."""
         scene = self.scene(split, index)
         rng = np.random.default_rng(
-            np.random.SeedSequence([zlib.crc32(self.name.encode()), zlib.crc32(split.encode()), index, seed])
+            np.random.SeedSequence([zlib.crc32(self.stream_name.encode()), zlib.crc32(split.encode()), index, seed])
         )
         start, goal = self.sample_problem(scene, rng)
         return Problem(scene, start, goal, tag=f"{self.name}/{split}/{index}/seed{seed}")
