@@ -12,8 +12,14 @@ listed and left out of the rates.
 One JSON line per problem goes to ``--out`` as it is measured (Ctrl-C keeps what was done);
 the summary per scenario is printed at the end (or from an existing file with ``--summary``).
 
+With ``--cameras N`` the planners see the scene only as ``N`` simulated depth cameras do
+(:mod:`pointplan.scenes.cameras`: one merged point cloud, what no camera sees missing):
+they plan against the cloud, and the evaluator certifies the path against the true
+obstacles. Problems whose start or goal collides with the cloud are listed apart.
+
     python benchmarks/bench_mbm.py --arm panda --out mbm_panda.jsonl
     python benchmarks/bench_mbm.py --summary mbm_panda.jsonl
+    python benchmarks/bench_mbm.py --arm panda --problems 10 --cameras 2 --out mbm_panda_cameras.jsonl
 """
 
 from __future__ import annotations
@@ -35,6 +41,13 @@ def run(args: argparse.Namespace) -> None:
     from pointplan.scenes.mbm import SCENARIOS, load_problem, make_arm, problem_count
 
     robot = make_arm(args.arm)
+    camera = None
+    if args.cameras:
+        from pointplan.scenes.cameras import CameraModel, camera_ring, seen_by_cameras
+        from pointplan.scenes.scene import Problem
+
+        w, h = (int(x) for x in args.camera_size.lower().split("x"))
+        camera = CameraModel(w, h, args.focal)
     names = args.planners.split(",")
     planners = {n: make_planner(n, robot, time_limit=args.time_limit) for n in names}
     scenarios = SCENARIOS if args.scenarios == "all" else tuple(args.scenarios.split(","))
@@ -52,12 +65,28 @@ def run(args: argparse.Namespace) -> None:
                     continue
                 row: dict[str, Any] = {"tag": p.tag, "scenario": scenario}
                 row["valid"] = not bool(robot.collides(p.scene.world, np.stack([p.start, p.goal])).any())
+                seen = p
+                if camera is not None and row["valid"]:
+                    t = time.perf_counter()
+                    scene = seen_by_cameras(p.scene, camera_ring(p.scene, args.cameras, args.distance), camera)
+                    seen = Problem(scene, p.start, p.goal, tag=p.tag)
+                    cloud = scene.obstacles[0]
+                    row["cameras"] = {
+                        "n": args.cameras,
+                        "size": args.camera_size,
+                        "focal": args.focal,
+                        "distance": args.distance,
+                        "points": len(cloud.points),
+                        "point_radius": cloud.point_radius(),
+                        "render_s": time.perf_counter() - t,
+                    }
+                    row["valid_cloud"] = not bool(robot.collides(scene.world, np.stack([p.start, p.goal])).any())
                 order = names[k % len(names) :] + names[: k % len(names)]
                 k += 1
-                for name in order if row["valid"] else []:
+                for name in order if row["valid"] and row.get("valid_cloud", True) else []:
                     gc.collect()
                     t = time.perf_counter()
-                    res = planners[name].plan(p)
+                    res = planners[name].plan(seen)
                     dt = time.perf_counter() - t
                     ok = bool(res.success) and bool(check_path(robot, p, res.path, tolerance=1e-6))
                     row[name] = {
@@ -75,7 +104,7 @@ def run(args: argparse.Namespace) -> None:
 
 def summary(path: Path) -> None:
     rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    names = sorted({k for r in rows for k, v in r.items() if isinstance(v, dict)})
+    names = sorted({k for r in rows for k, v in r.items() if isinstance(v, dict) and k != "cameras"})
     by: dict[str, list[dict[str, Any]]] = {}
     for r in rows:
         by.setdefault(r["scenario"], []).append(r)
@@ -83,7 +112,7 @@ def summary(path: Path) -> None:
     print("| scenario | problems (valid) | " + " | ".join(f"{n}: solved, median / mean s" for n in names) + " |")
     print("|---|---|" + "---|" * len(names))
     for sc, rs in by.items():
-        valid = [r for r in rs if r["valid"]]
+        valid = [r for r in rs if r["valid"] and r.get("valid_cloud", True)]
         cells = []
         for n in names:
             got = [r[n] for r in valid if n in r]
@@ -100,6 +129,17 @@ def summary(path: Path) -> None:
             print(f"{n}: median time / OMPL's median time = {ratio:.2f}")
     bad = [r["tag"] for r in rows if not r["valid"]]
     print(f"left out (start or goal collides for the sphere model): {len(bad)} {' '.join(bad)}")
+    blind = [r["tag"] for r in rows if r["valid"] and not r.get("valid_cloud", True)]
+    if any("cameras" in r for r in rows):
+        cams = [r["cameras"] for r in rows if "cameras" in r]
+        print(
+            f"cameras: {cams[0]['n']} of {cams[0]['size']} pixels; cloud points median {np.median([c['points'] for c in cams]):.0f}, "
+            f"point radius median {1000 * np.median([c['point_radius'] for c in cams]):.1f} mm; "
+            f"left out (start or goal collides with the cloud): {len(blind)} {' '.join(blind)}"
+        )
+        for n in names:
+            wrong = [r["tag"] for r in rows if n in r and r[n]["claimed"] and not r[n]["ok"]]
+            print(f"{n}: paths planned on the cloud that touch the true obstacles: {len(wrong)} {' '.join(wrong)}")
 
 
 def main() -> None:
@@ -111,6 +151,19 @@ def main() -> None:
     ap.add_argument("--time-limit", type=float, default=30.0, help="seconds per query (default: %(default)s)")
     ap.add_argument("--out", default="mbm.jsonl", help="one JSON line per problem, appended (default: %(default)s)")
     ap.add_argument("--summary", help="print the summary of an existing output file and stop")
+    ap.add_argument(
+        "--cameras", type=int, default=0, help="plan on what N simulated depth cameras see (default: 0, off)"
+    )
+    ap.add_argument("--camera-size", default="640x480", help="the cameras' image, WxH pixels (default: %(default)s)")
+    ap.add_argument(
+        "--focal", type=float, default=550.0, help="the cameras' focal length, pixels (default: %(default)s)"
+    )
+    ap.add_argument(
+        "--distance",
+        type=float,
+        default=1.5,
+        help="the cameras' distance to the obstacles' centre, m (default: %(default)s)",
+    )
     args = ap.parse_args()
     if args.summary:
         summary(Path(args.summary))

@@ -307,3 +307,32 @@ def test_the_rays_policy_on_a_cloud_is_compiled_and_the_step_loop(cloud_problems
         if a.success:
             assert check_path(SShape(), p, a.path)
     assert same >= len(cloud_problems) - 1 and moved >= 2
+
+
+def test_sphere_queries_on_the_grid_match_a_kd_tree() -> None:
+    """``grid_point_within`` (through ``CollisionWorld.spheres_collide``) and
+    ``grid_nearest_bound`` against scipy's k-d tree on a cloud and random spheres: the same
+    hits, the nearest distance where it is within the cap, a lower bound at least the cap
+    where it is not."""
+    from pointplan.geometry._kernels import grid_nearest_bound
+
+    rng = np.random.default_rng(4)
+    pts = rng.uniform(-0.5, 0.5, (3000, 3)) * [1.0, 1.0, 0.1]  # a thick sheet of points
+    cloud = PointCloud(pts, np.tile([0.0, 0.0, 1.0], (len(pts), 1)), radius=0.004)
+    scene = Scene([cloud], np.full(3, -1.0), np.full(3, 1.0))
+    world = scene.world
+    c = rng.uniform(-0.7, 0.7, (4000, 3))
+    r = rng.uniform(0.0, 0.08, 4000)
+    tree = cKDTree(pts)
+    dist, _ = tree.query(c)
+    assert np.array_equal(world.spheres_collide(c, r), dist <= r + 0.004)
+    assert 200 < (dist <= r + 0.004).sum() < 3800
+    grid = world.sphere_grid()
+    assert grid is not None
+    p, starts, origin, dims, params, _ = grid
+    cap = 0.15
+    got = np.array([grid_nearest_bound(x, y, z, cap, p, starts, origin, dims, params) for x, y, z in c])
+    near = dist <= cap
+    assert np.allclose(got[near], dist[near], rtol=0, atol=1e-12)
+    assert np.all(got[~near] >= cap) and np.all(got[~near] <= dist[~near] + 1e-12)
+    assert near.sum() > 500 and (~near).sum() > 500

@@ -220,3 +220,77 @@ def winding_numbers_compiled(points, tri):  # type: ignore[no-untyped-def]
     out = np.empty(len(points))
     _winding_numbers(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(tri, dtype=np.float64), out)
     return out
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _grid_cube(x, y, z, e, origin, dims, inv, lo, hi):  # type: ignore[no-untyped-def]
+    """The cells ``[lo, hi]`` (per axis, clipped to the grid) of the cube ``(x, y, z) +- e``;
+    False where it misses the grid (a point's cell is ``floor((p - origin) * inv)``)."""
+    for a in range(3):
+        v = x if a == 0 else (y if a == 1 else z)
+        x0 = (v - e - origin[a]) * inv
+        x1 = (v + e - origin[a]) * inv
+        if not (x1 >= 0.0 and x0 < dims[a]):  # (also a NaN)
+            return False
+        lo[a] = np.int64(np.floor(max(x0, 0.0)))
+        hi[a] = np.int64(np.floor(min(x1, dims[a] - 1.0)))
+    return True
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def grid_point_within(x, y, z, reach, pts, starts, origin, dims, params):  # type: ignore[no-untyped-def]
+    """Is some point of the grid (``collision.cloud_grid_arrays``: points, row starts,
+    origin, cells per axis, ``params`` with ``1 / cell`` first and the round-off slack
+    fourth) within ``reach`` of ``(x, y, z)``: ``sqrt(sum((p - c)^2)) <= reach`` (the k-d
+    tree's test)? Only the cells the cube ``+- (reach + slack)`` covers are read."""
+    lo = np.empty(3, np.int64)
+    hi = np.empty(3, np.int64)
+    if not _grid_cube(x, y, z, reach + params[3], origin, dims, params[0], lo, hi):
+        return False
+    n1, n2 = dims[1], dims[2]
+    for i in range(lo[0], hi[0] + 1):
+        for j in range(lo[1], hi[1] + 1):
+            row = (i * n1 + j) * n2
+            for q in range(starts[row + lo[2]], starts[row + hi[2] + 1]):
+                d0, d1, d2 = pts[q, 0] - x, pts[q, 1] - y, pts[q, 2] - z
+                if np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) <= reach:
+                    return True
+    return False
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def grid_nearest_bound(x, y, z, cap, pts, starts, origin, dims, params):  # type: ignore[no-untyped-def]
+    """The distance from ``(x, y, z)`` to the nearest point of the grid (see
+    :func:`grid_point_within`) where it is at most ``cap``, else a lower bound of it that is
+    at least ``cap`` (no point lies within it). Searches cubes of growing half side (two
+    cells, doubled up to ``cap``): a point found within the half side is the nearest, since
+    every point that near lies in the cube."""
+    if pts.shape[0] == 0:
+        return np.inf
+    lo = np.empty(3, np.int64)
+    hi = np.empty(3, np.int64)
+    n1, n2 = dims[1], dims[2]
+    lim = min(2.0 * params[1], cap)
+    while True:
+        best = np.inf
+        if _grid_cube(x, y, z, lim + params[3], origin, dims, params[0], lo, hi):
+            for i in range(lo[0], hi[0] + 1):
+                for j in range(lo[1], hi[1] + 1):
+                    row = (i * n1 + j) * n2
+                    for q in range(starts[row + lo[2]], starts[row + hi[2] + 1]):
+                        d0, d1, d2 = pts[q, 0] - x, pts[q, 1] - y, pts[q, 2] - z
+                        best = min(best, np.sqrt(d0 * d0 + d1 * d1 + d2 * d2))
+        if best <= lim:
+            return best
+        if lim >= cap:
+            return lim
+        lim = min(2.0 * lim, cap)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def spheres_hit_cloud_compiled(c, reach, pts, starts, origin, dims, params, out):  # type: ignore[no-untyped-def]
+    """``out[m]``: is some point of the cloud's grid within ``reach[m]`` of ``c[m]``
+    (``(M, 3)``; :func:`grid_point_within`)?"""
+    for m in range(c.shape[0]):
+        out[m] = grid_point_within(c[m, 0], c[m, 1], c[m, 2], reach[m], pts, starts, origin, dims, params)
+    return out

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from ._kernels import obb_overlap_compiled, winding_numbers_compiled
+from ._kernels import obb_overlap_compiled, spheres_hit_cloud_compiled, winding_numbers_compiled
 from .shapes import Box, Capsule, Cone, Cylinder, Mesh, PointCloud, Shape, Sphere
 
 Array = NDArray[np.float64]
@@ -437,6 +437,16 @@ class CollisionWorld:
         hit |= self._coal_query((c, rot, h), None, kind="box", meshes_only=False)
         return hit
 
+    def sphere_grid(self) -> CloudGrid | None:
+        """The single scene's cloud grid the compiled sphere tests read (``None``: no cloud):
+        cells of four point radii, at least 2 cm (a sphere's test reads a few cells; a
+        smaller cell holds few points)."""
+        return self.cloud_grid(max(4.0 * self._cloud_margin(0), 0.02))
+
+    def cloud_point_radius(self) -> float:
+        """The single scene's cloud point radius (0 without a cloud)."""
+        return self._cloud_margin(0)
+
     def _cloud_margin(self, i: int) -> float:
         return float(self.cloud_radius[i]) if i < len(self.cloud_radius) else 0.0
 
@@ -448,9 +458,26 @@ class CollisionWorld:
                 continue
             flat = ci.reshape(-1, self.dim)
             reach = ri.reshape(-1) + self._cloud_margin(i)  # each point is a sphere of the cloud's point radius
-            rmax = float(reach.max()) if reach.size else 0.0
-            dist, _ = tree.query(flat, k=1, distance_upper_bound=rmax + 1e-12)
-            res = (dist <= reach).reshape(ci.shape[:-1])
+            reach = np.broadcast_to(reach, flat.shape[:1])
+            grid = self.sphere_grid() if self.dim == 3 and self.batch_shape == () else None
+            if grid is not None:  # the compiled test on the cloud's grid (the same answer)
+                hits = np.empty(len(flat), dtype=bool)
+                pts, starts, origin, dims, params, _ = grid
+                spheres_hit_cloud_compiled(
+                    np.ascontiguousarray(flat, np.float64),
+                    np.ascontiguousarray(reach, np.float64),
+                    pts,
+                    starts,
+                    origin,
+                    dims,
+                    params,
+                    hits,
+                )
+                res = hits.reshape(ci.shape[:-1])
+            else:
+                rmax = float(reach.max()) if reach.size else 0.0
+                dist, _ = tree.query(flat, k=1, distance_upper_bound=rmax + 1e-12)
+                res = (dist <= reach).reshape(ci.shape[:-1])
             if self.batch_shape == ():
                 out |= res
             else:

@@ -1,13 +1,16 @@
 """Compiled (numba) collision test of an arm's spheres: forward kinematics, the spheres
-against boxes, spheres and cylinders, and the self-collision pairs, one configuration at a
-time with an early exit. :meth:`pointplan.robots.arm.ArmRobot.collides` uses it for scenes
-made of those primitives; the numpy path (:class:`~pointplan.geometry.collision.CollisionWorld`)
-computes the same and is what the tests compare it with."""
+against boxes, spheres, cylinders and a point cloud (through its grid), and the
+self-collision pairs, one configuration at a time with an early exit.
+:meth:`pointplan.robots.arm.ArmRobot.collides` uses it for scenes made of those; the numpy
+path (:class:`~pointplan.geometry.collision.CollisionWorld`) computes the same and is what
+the tests compare it with."""
 
 from __future__ import annotations
 
 import numba
 import numpy as np
+
+from ..geometry._kernels import grid_nearest_bound, grid_point_within
 
 
 def _frames(q, parent, rot0, pos0, axis, prismatic, base_rot, base_pos, rot, pos):  # type: ignore[no-untyped-def]
@@ -63,8 +66,12 @@ def _place(q, kin_i, kin_f, s_joint, s_center, rot, pos, c):  # type: ignore[no-
     _centers(rot, pos, base_rot, base_pos, s_joint, s_center, c)
 
 
-def _sphere_hits(c, p, r, box_c, box_r, box_h, sph_c, sph_r, cyl_c, cyl_r, cyl_rad, cyl_half):  # type: ignore[no-untyped-def]
-    """Does sphere ``p`` (centre ``c[p]``, radius ``r``) touch a box, sphere or cylinder?"""
+def _sphere_hits(c, p, r, box_c, box_r, box_h, sph_c, sph_r, cyl_c, cyl_r, cyl_rad, cyl_half, cloud):  # type: ignore[no-untyped-def]
+    """Does sphere ``p`` (centre ``c[p]``, radius ``r``) touch a box, sphere, cylinder or
+    a point of the cloud (``cloud``: its grid and point radius, :func:`pack_cloud`)?"""
+    pts, starts, origin, dims, params, pr = cloud
+    if pts.shape[0] > 0 and grid_point_within(c[p, 0], c[p, 1], c[p, 2], r + pr, pts, starts, origin, dims, params):
+        return True
     r2 = r * r
     for o in range(box_c.shape[0]):
         d2 = 0.0
@@ -113,6 +120,7 @@ def _arm_collides(  # type: ignore[no-untyped-def]
     cyl_r,
     cyl_rad,
     cyl_half,
+    cloud,
     out,
 ):
     """``out[b]``: does configuration ``q[b]`` collide? ``sizes (B or 1, P + K)``: sphere
@@ -128,7 +136,7 @@ def _arm_collides(  # type: ignore[no-untyped-def]
         sz = sizes[0] if sizes.shape[0] == 1 else sizes[b]
         hit = False
         for p in range(p_count):
-            if _sphere_hits(c, p, sz[p], box_c, box_r, box_h, sph_c, sph_r, cyl_c, cyl_r, cyl_rad, cyl_half):
+            if _sphere_hits(c, p, sz[p], box_c, box_r, box_h, sph_c, sph_r, cyl_c, cyl_r, cyl_rad, cyl_half, cloud):
                 hit = True
                 break
         if not hit:
@@ -144,7 +152,7 @@ def _arm_collides(  # type: ignore[no-untyped-def]
 
 def _sphere_clearances(c, radii, box_c, box_r, box_h, sph_c, sph_r, cyl_c, cyl_r, cyl_rad, cyl_half, clear):  # type: ignore[no-untyped-def]
     """``clear[p]``: distance from sphere ``p`` (centre ``c[p]``, radius ``radii[p]``) to the
-    nearest obstacle (``<= 0``: touching or inside; ``inf`` without obstacles)."""
+    nearest primitive obstacle (``<= 0``: touching or inside; ``inf`` without obstacles)."""
     for p in range(c.shape[0]):
         best = np.inf
         for o in range(box_c.shape[0]):
@@ -174,9 +182,33 @@ def _sphere_clearances(c, radii, box_c, box_r, box_h, sph_c, sph_r, cyl_c, cyl_r
         clear[p] = out
 
 
+def _cloud_step(c, radii, rate, margin, step, cloud):  # type: ignore[no-untyped-def]
+    """The advancement step ``step`` (already bounded by the other obstacles and the
+    segment's end) bounded by the cloud too, and whether a sphere is within ``margin`` of
+    it. A sphere's search for its nearest point stops where that point could no longer
+    shorten the step (``margin + step * rate`` plus the radii), so spheres in the open read
+    a few cells (:func:`grid_nearest_bound`: past its cap it gives a lower bound, which
+    leaves the step as it is)."""
+    pts, starts, origin, dims, params, pr = cloud
+    for p in range(c.shape[0]):
+        reach = margin + step * rate[p] + pr + radii[p]
+        # (searched a little past reach: a point at reach itself is found, not bounded)
+        near = grid_nearest_bound(
+            c[p, 0], c[p, 1], c[p, 2], reach * (1.0 + 1e-9) + 1e-12, pts, starts, origin, dims, params
+        )
+        if near > reach:  # nothing within reach: this sphere neither blocks nor shortens the step
+            continue
+        clear = near - pr - radii[p]
+        if clear <= margin:
+            return True, step
+        if rate[p] > 0.0:
+            step = min(step, (clear - margin) / rate[p])
+    return False, step
+
+
 def _arm_advance(  # type: ignore[no-untyped-def]
     q0, twist, kin_i, kin_f, s_joint, s_center, pairs, radii, keep, w_sphere, w_pair,
-    box_c, box_r, box_h, sph_c, sph_r, cyl_c, cyl_r, cyl_rad, cyl_half, margin, max_iter, out_s, out_n,
+    box_c, box_r, box_h, sph_c, sph_r, cyl_c, cyl_r, cyl_rad, cyl_half, cloud, margin, max_iter, out_s, out_n,
 ):  # fmt: skip
     """Conservative advancement along the joint-space segments ``q0[e] + s twist[e]``:
     from ``s = 0``, step by the least ``(clearance - margin) / rate`` over the spheres (rate:
@@ -187,6 +219,7 @@ def _arm_advance(  # type: ignore[no-untyped-def]
     free (1: all of it; -1: the start itself is not); ``out_n[e]``: configurations evaluated."""
     ne, n = q0.shape
     p_count = s_joint.shape[0]
+    pts = cloud[0]
     rot = np.empty((n, 3, 3))
     pos = np.empty((n, 3))
     c = np.empty((p_count, 3))
@@ -230,6 +263,8 @@ def _arm_advance(  # type: ignore[no-untyped-def]
                         break
                     if prate[k] > 0.0:
                         step = min(step, (gap - margin) / prate[k])
+            if not blocked and pts.shape[0] > 0:
+                blocked, step = _cloud_step(c, radii, rate, margin, min(step, 1.0 - s), cloud)
             if blocked:
                 break
             if s + step >= 1.0:
@@ -250,8 +285,19 @@ _centers = numba.njit(cache=True, nogil=True)(_centers)
 _place = numba.njit(cache=True, nogil=True)(_place)
 _sphere_hits = numba.njit(cache=True, nogil=True)(_sphere_hits)
 _sphere_clearances = numba.njit(cache=True, nogil=True)(_sphere_clearances)
+_cloud_step = numba.njit(cache=True, nogil=True)(_cloud_step)
 _arm_advance = numba.njit(cache=True, nogil=True)(_arm_advance)
 _arm_collides = numba.njit(cache=True, nogil=True)(_arm_collides)
+
+
+def pack_cloud(grid, point_radius):  # type: ignore[no-untyped-def]
+    """A scene's cloud as the kernels take it: its grid (``CollisionWorld.cloud_grid``:
+    points, row starts, origin, cells per axis, parameters) and its point radius; an empty
+    one for ``grid=None`` (no cloud)."""
+    if grid is None:
+        return (np.zeros((0, 3)), np.zeros(1, np.int64), np.zeros(3), np.zeros(3, np.int64), np.ones(4), 0.0)
+    pts, starts, origin, dims, params, _ = grid
+    return (pts, starts, origin, np.asarray(dims, np.int64), params, float(point_radius))
 
 
 def pack_kinematics(parent, prismatic, rot0, pos0, axis, base_rot, base_pos):  # type: ignore[no-untyped-def]

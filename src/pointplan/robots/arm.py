@@ -295,7 +295,7 @@ class ArmRobot(Robot):
         w = world
         _arm_collides(
             flat, sizes, *self._packed, m.sphere_joint, m.sphere_center, m.self_pairs,
-            w.box_c, w.box_r, w.box_h, w.sph_c, w.sph_r, w.cyl_c, w.cyl_r, w.cyl_rad, w.cyl_half, out,
+            w.box_c, w.box_r, w.box_h, w.sph_c, w.sph_r, w.cyl_c, w.cyl_r, w.cyl_rad, w.cyl_half, _cloud(w), out,
         )  # fmt: skip
         return out.reshape(lead)
 
@@ -411,7 +411,8 @@ class ArmRobot(Robot):
         _arm_advance(
             q0, np.ascontiguousarray(twist), *self._packed, m.sphere_joint, m.sphere_center, m.self_pairs,
             self._sizes[:p], self._sizes[p:], m.speed_bound, m.pair_speed_bound,
-            w.box_c, w.box_r, w.box_h, w.sph_c, w.sph_r, w.cyl_c, w.cyl_r, w.cyl_rad, w.cyl_half, CONTACT_MARGIN, max_iter, out_s, out_n,
+            w.box_c, w.box_r, w.box_h, w.sph_c, w.sph_r, w.cyl_c, w.cyl_r, w.cyl_rad, w.cyl_half, _cloud(w),
+            CONTACT_MARGIN, max_iter, out_s, out_n,
         )  # fmt: skip
         return out_s, out_n
 
@@ -447,14 +448,21 @@ def _fraction_inside(q0: Array, twist: Array, low: Array, high: Array) -> Array:
 
 
 def _primitives_only(world: CollisionWorld) -> bool:
-    """Whether a single-scene world holds only boxes, spheres and cylinders (what the
-    compiled arm test handles; capsules, cones, meshes and point clouds take the numpy path)."""
+    """Whether a single-scene world holds only boxes, spheres, cylinders and point clouds
+    (what the compiled arm test handles; capsules, cones and meshes take the numpy path)."""
     return (
         world.cap_a.shape[-2] == 0
         and world.con_c.shape[-2] == 0
-        and all(t is None for t in world.cloud_trees)
+        and (world.dim == 3 or all(t is None for t in world.cloud_trees))
         and not any(it[4] is not None for items in world.coal_items for it in items)
     )
+
+
+def _cloud(world: CollisionWorld) -> tuple[Any, ...]:
+    """The single scene's cloud as the compiled arm test takes it (an empty one without)."""
+    from ._arm_kernels import pack_cloud
+
+    return pack_cloud(world.sphere_grid(), world.cloud_point_radius())
 
 
 # ---------------------------------------------------------------------- loading
