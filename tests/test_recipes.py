@@ -34,8 +34,8 @@ OPTIONS = {
 NOT_COMPARED = {"total_steps", "init_actor", "demos", "demos_file", "val_demos", "val_demos_file", "start_demos"}
 #: cloning steps whose result is kept in checkpoints/ (recipe, step index): file
 CLONES = {
-    ("sshape_local_policy", 0): "sshape_local_bc.pt",
-    ("sshape_local_policy", 1): "sshape_local_bc_spread.pt",
+    ("sshape_local_policy", 1): "sshape_local_bc_roadmap.pt",
+    ("sshape_global_policy", 0): "sshape_local_bc.pt",
     ("sshape_global_policy", 1): "sshape_global_bc.pt",
     ("slotmoving_sshape_local_policy", 1): "slotmoving_local_bc_threading.pt",
 }
@@ -64,7 +64,8 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     else:
         assert argv[0] == "python", argv
         parser, rest = _script_parser(ROOT / argv[1]), argv[2:]
-        sub = _subparser(parser, rest[0])
+        has_commands = any(isinstance(a, argparse._SubParsersAction) for a in parser._actions)
+        sub = _subparser(parser, rest[0]) if has_commands else parser
     known = {o for a in sub._actions for o in a.option_strings}
     for arg in rest:
         if arg.startswith("--"):

@@ -237,34 +237,37 @@ RECIPES: dict[str, Recipe] = {
         Recipe(
             name="sshape_local_policy",
             shipped="sshape_local_policy.pt",
-            title="the S-shape's local policy in 3D-Boxes: cloned with its spread, then PPO (run 7)",
+            title="the S-shape's local policy in 3D-Boxes: the roadmap expert's demonstrations, cloned with its spread, then PPO",
             description=(
-                "Bi-RRT demonstrations of 3,000 problems (planned, as they were, by the 8-epoch clone of docs/notebook/sshape.md), the clone with its "
-                "spread (60 epochs, --spread-weight 1, separate encoders: checkpoints/sshape_local_bc_spread.pt), then PPO run 7 "
-                "(docs/results/3d-sshape.md, 'How the PPO policies were trained'). The shipped file is run 7's best by validation with the escape, at "
-                "1,331,200 steps. The docs give the spread clone's settings in words; its command is the one of the earlier docs/learning.md (git "
-                "show 9dc8483^:docs/learning.md), whose --encoder-sharing separate the checkpoint's network confirms; its bc_config's 2,000 "
-                "problems is the default, and an existing demonstrations file is used whole. PPO: the docs' first command leaves --steps at 2,000,000, but the "
-                "run's ppo_config says 20,000,000 and its first session went past 2,200,000; it was stopped by hand and continued to 3,560,960 "
-                "steps (checkpoints/sshape3d_local_ppo_last.pt) without a better validation. Here --steps stops it at the shipped step."
+                "The roadmap expert (pointplan.learning.roadmap: one roadmap of 2,000 nodes per training workspace, one shortest-path "
+                "search from the goal, so every state has one label) demonstrates 2,000 training problems: 1,046,922 steps, 72 minutes of "
+                "one core. The clone with its spread (10 epochs, separate encoders: checkpoints/sshape_local_bc_roadmap.pt; it was run as "
+                "4 epochs, then resumed to 10), then PPO with the settings of the earlier shipped policy (run 7). The shipped file is the "
+                "PPO run's best by validation with the escape, at 665,600 steps (docs/notebook/sshape.md, 'Cloning the roadmap expert'); "
+                "the run (ppo_config: --steps 20000000) went on to 1,111,040 steps without a better validation "
+                "(checkpoints/sshape3d_local_roadmap_ppo_last.pt). Here --steps stops it at the shipped step."
             ),
             steps=(
-                _SSHAPE_DEMOS,
                 _step(
-                    "pointplan bc --env boxes3d --robot sshape --observation local --encoder-sharing separate --epochs {60|1} "
-                    "--spread-weight 1 --demos {root}/demos_boxes3d_sshape_3k.npz --run-dir {root}/bc_sshape_spread",
-                    "the clone with its spread: 60 epochs on all 2,995 demonstrations",
+                    "python scripts/roadmap_demos.py --problems {2000|2} --nodes {2000|100} --k 15 --lookahead --save-every 200 "
+                    "--out {root}/demos_roadmap.npz",
+                    "the roadmap expert's demonstrations of 2,000 training problems of 3D-Boxes (the problems pointplan bc would plan)",
+                ),
+                _step(
+                    "pointplan bc --env boxes3d --robot sshape --observation local --encoder-sharing separate --epochs {10|1} "
+                    "--spread-weight 1 --demos {root}/demos_roadmap.npz --run-dir {root}/bc_roadmap_local",
+                    "the clone with its spread: 10 epochs on the million steps",
                     "--eval-episodes 2",
                 ),
                 _step(
-                    f"pointplan ppo --init-actor {{root}}/bc_sshape_spread/bc.pt {_SSHAPE_PPO} --steps {{1331200|128}} --threads 1 "
-                    "--run-dir {root}/ppo_local_sparse_ent",
-                    "PPO run 7: -0.1 a step, +20 on arrival, no collision penalty or action cost, lambda 0.98, entropy 0.01, best.pt by the escape",
+                    f"pointplan ppo --init-actor {{root}}/bc_roadmap_local/bc.pt {_SSHAPE_PPO} --steps {{665600|128}} --threads 1 "
+                    "--run-dir {root}/ppo_roadmap_local",
+                    "PPO: -0.1 a step, +20 on arrival, no collision penalty or action cost, lambda 0.98, entropy 0.01, best.pt by the escape",
                     _PPO_SMOKE,
                 ),
             ),
-            product=("ppo_local_sparse_ent/best.pt",),
-            cost="about 78 minutes: demonstrations 23 minutes on 2 workers, cloning 18, PPO 37 (one core); the 8-epoch clone that plans them not timed",
+            product=("ppo_roadmap_local/best.pt",),
+            cost="about 2.6 hours of one core: demonstrations 72 minutes, cloning 48, PPO 21 (validation included)",
         ),
         Recipe(
             name="sshape_global_policy",

@@ -153,10 +153,16 @@ def _threading_labels(
 
 
 def _roadmap_labels(
-    cfg: DaggerConfig, scenario: Scenario, jobs: Sequence[DemoJob], progress: bool, desc: str
+    cfg: DaggerConfig,
+    scenario: Scenario,
+    jobs: Sequence[DemoJob],
+    progress: bool,
+    desc: str,
+    stop: Callable[[], bool] = lambda: False,
 ) -> list[tuple[int, np.ndarray]]:
     """The roadmap expert's paths from the states of ``jobs`` (grouped by problem: one
-    roadmap and one search per workspace), cut into policy steps."""
+    roadmap and one search per workspace), cut into policy steps; ``stop`` is asked after
+    each workspace (Ctrl-C: the round is played again on resume)."""
     from .roadmap import label_states
 
     by_problem: dict[int, list[np.ndarray]] = {}
@@ -169,6 +175,8 @@ def _roadmap_labels(
         items = tqdm(items, desc=desc, unit="workspace")
     out: list[tuple[int, np.ndarray]] = []
     for index, states in items:
+        if stop():
+            break
         paths = label_states(
             scenario, "train", cfg.bc.seed, index, states, cfg.roadmap_nodes, cfg.roadmap_k, rng_seed=cfg.bc.seed
         )
@@ -241,6 +249,7 @@ def _roll_out_and_label(
     rnd: int,
     pool: DemoPool | None,
     progress: bool,
+    stop: Callable[[], bool] = lambda: False,
 ) -> tuple[list[PlanResult], list[tuple[int, np.ndarray]]]:
     """Round ``rnd``'s rollouts of the policy on fresh training problems, and the expert's
     paths from states of the failed ones."""
@@ -259,7 +268,7 @@ def _roll_out_and_label(
             scenario, labels, progress, f"round {rnd + 1}: expert labels", copies=cfg.expert == "slot-threading-copies"
         )
     if cfg.expert == "roadmap":
-        return results, _roadmap_labels(cfg, scenario, jobs, progress, f"round {rnd + 1}: roadmap labels")
+        return results, _roadmap_labels(cfg, scenario, jobs, progress, f"round {rnd + 1}: roadmap labels", stop)
     return results, plan_demos(jobs, pool, progress, desc=f"round {rnd + 1}: expert labels")
 
 
@@ -355,7 +364,7 @@ class _DaggerRun:
         ended it early (the round is played again on resume)."""
         cfg, b = self.cfg, self.cfg.bc
         self.actor.eval()
-        results, new = _roll_out_and_label(cfg, self.scenario, self.policy, self.env, rnd, pool, progress)
+        results, new = _roll_out_and_label(cfg, self.scenario, self.policy, self.env, rnd, pool, progress, stop)
         if stop():
             return None
         self.demos = demos_from_paths(self.scenario, "train", b.seed, self.demos.paths + new)
