@@ -1,4 +1,5 @@
-"""Arms on MotionBenchMaker: Bi-RRT and OMPL's RRTConnect taking turns on the same problems.
+"""Arms on MotionBenchMaker: Bi-RRT and OMPL's RRTConnect (or any planners, the learned arm
+policy and its hybrid included) taking turns on the same problems.
 
 For an arm (``panda`` or ``ur5``), every problem of the chosen scenarios is planned by each
 planner in turn (the order rotates from problem to problem, so that a busy machine slows
@@ -20,6 +21,7 @@ obstacles. Problems whose start or goal collides with the cloud are listed apart
     python benchmarks/bench_mbm.py --arm panda --out mbm_panda.jsonl
     python benchmarks/bench_mbm.py --summary mbm_panda.jsonl
     python benchmarks/bench_mbm.py --arm panda --problems 10 --cameras 2 --out mbm_panda_cameras.jsonl
+    python benchmarks/bench_mbm.py --planners policy,hybrid,ompl:RRTConnect --checkpoint bc.pt --out mbm_policy.jsonl
 """
 
 from __future__ import annotations
@@ -36,7 +38,6 @@ import numpy as np
 
 def run(args: argparse.Namespace) -> None:
     from pointplan.evaluation import check_path
-    from pointplan.planners import make_planner
     from pointplan.planners.base import path_length
     from pointplan.scenes.mbm import SCENARIOS, load_problem, make_arm, problem_count
 
@@ -49,7 +50,7 @@ def run(args: argparse.Namespace) -> None:
         w, h = (int(x) for x in args.camera_size.lower().split("x"))
         camera = CameraModel(w, h, args.focal)
     names = args.planners.split(",")
-    planners = {n: make_planner(n, robot, time_limit=args.time_limit) for n in names}
+    planners = {n: _planner(n, robot, args) for n in names}
     scenarios = SCENARIOS if args.scenarios == "all" else tuple(args.scenarios.split(","))
     out = Path(args.out)
     done = set()
@@ -97,9 +98,24 @@ def run(args: argparse.Namespace) -> None:
                         "nodes": int(res.nodes),
                         "length": path_length(robot, res.path) if ok else None,
                     }
+                    if "policy_steps" in res.info:  # the hybrid: how far the policy went alone
+                        row[name]["policy_steps"] = int(res.info["policy_steps"])
+                        row[name]["repaired"] = bool(res.info["repaired"])
                 f.write(json.dumps(row) + "\n")
                 f.flush()
                 print(p.tag, {n: (row[n]["ok"], round(row[n]["time_s"], 3)) for n in names if n in row}, flush=True)
+
+
+def _planner(name: str, robot: Any, args: argparse.Namespace) -> Any:
+    """A planner by name; the learned ones (``policy``, ``hybrid``, ``hybrid-ompl``) take
+    ``--checkpoint``, and the policy alone has no time limit (its horizon ends it)."""
+    from pointplan.planners import make_planner
+
+    if name == "policy":
+        return make_planner(name, robot, checkpoint=args.checkpoint)
+    if name.startswith("hybrid"):
+        return make_planner(name, robot, checkpoint=args.checkpoint, time_limit=args.time_limit)
+    return make_planner(name, robot, time_limit=args.time_limit)
 
 
 def summary(path: Path) -> None:
@@ -127,6 +143,14 @@ def summary(path: Path) -> None:
                 [r["ompl:RRTConnect"]["time_s"] for r in both]
             )
             print(f"{n}: median time / OMPL's median time = {ratio:.2f}")
+    for n in names:
+        hyb = [r[n] for r in rows if r["valid"] and n in r and "policy_steps" in r[n]]
+        if hyb:
+            alone = [h for h in hyb if h["ok"] and not h["repaired"]]
+            print(
+                f"{n}: solved by the policy alone {len(alone)}/{len(hyb)}; fallback used on {sum(h['repaired'] for h in hyb)}; "
+                f"policy steps median {np.median([h['policy_steps'] for h in hyb]):.0f}, nodes median {np.median([h['nodes'] for h in hyb]):.0f}"
+            )
     bad = [r["tag"] for r in rows if not r["valid"]]
     print(f"left out (start or goal collides for the sphere model): {len(bad)} {' '.join(bad)}")
     blind = [r["tag"] for r in rows if r["valid"] and not r.get("valid_cloud", True)]
@@ -149,6 +173,9 @@ def main() -> None:
     ap.add_argument("--problems", type=int, default=0, help="first N problems per scenario (default: all)")
     ap.add_argument("--planners", default="birrt,ompl:RRTConnect", help="(default: %(default)s)")
     ap.add_argument("--time-limit", type=float, default=30.0, help="seconds per query (default: %(default)s)")
+    ap.add_argument(
+        "--checkpoint", help="the arm policy of the planners policy, hybrid and hybrid-ompl (a bc.pt or ppo.pt)"
+    )
     ap.add_argument("--out", default="mbm.jsonl", help="one JSON line per problem, appended (default: %(default)s)")
     ap.add_argument("--summary", help="print the summary of an existing output file and stop")
     ap.add_argument(

@@ -285,3 +285,30 @@ def test_a_failing_viewer_releases_its_port(free_port: Callable[[], int]) -> Non
         assert server.get_port() == port  # viser moves to another port when one is taken
     finally:
         server.stop()
+
+
+def test_viewer_moves_an_arms_spheres_along_its_path(free_port: Callable[[], int]) -> None:
+    """An arm is drawn sphere by sphere: at every slider step the batched spheres sit at
+    the sphere centres of that step's configuration (pinocchio's placements, through
+    ``sphere_centers``, tested against pinocchio in test_arm), scaled by the radii; the
+    camera frames the workspace, not the joint limits."""
+    pytest.importorskip("viser")
+    from pointplan.scenes.mbm import load_problem, make_arm
+    from pointplan.viz.viewer import view_problem
+
+    robot = make_arm("panda")
+    problem = load_problem("panda", "box", 1)
+    path = np.stack([problem.start, (problem.start + problem.goal) / 2, problem.goal])
+    server = view_problem(problem, robot, path=path, port=free_port(), block=False)
+    try:
+        h = server.pointplan
+        n = len(h["timed"])
+        assert n > 3
+        for t in (0, n // 2, n - 1):
+            h["show_step"](t)
+            want = robot.sphere_centers(h["timed"][t][None])[0]
+            np.testing.assert_allclose(h["robot"].batched_positions, want, atol=1e-5)
+        np.testing.assert_allclose(h["robot"].batched_scales, robot.model.sphere_radius, atol=1e-6)
+        assert not np.allclose(h["timed"][0], h["timed"][-1])
+    finally:
+        server.stop()

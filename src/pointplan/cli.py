@@ -359,7 +359,7 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument("--scene", help="plan on a scene file (JSON, see docs/scenes.md) instead of --env")
     p.add_argument(
         "--robot",
-        help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot), or the robot of a scene file that names none",
+        help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot), panda or ur5 for mbm-* and armcells, or the robot of a scene file that names none",
     )
     p.add_argument(
         "--planner",
@@ -1078,6 +1078,8 @@ def cmd_bc(args: argparse.Namespace) -> int:
     from .learning.dagger import DaggerConfig, train_dagger
 
     given = {**given_options(args, BC_OPTIONS), "bc.address": args.address}  # (the Ray cluster is this command's)
+    if "max_nodes" in given:  # the expert's budget: DAgger's labels and the first demonstrations
+        given["bc.expert_max_nodes"] = given["max_nodes"]
     cloning = False  # --resume of a cloning run (not DAgger)
     if args.resume:
         cfg, cloning = _bc_resume_config(args, given)
@@ -1500,9 +1502,12 @@ def _add_net(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--env",
         default="narrow2d",
-        help="scenario to train on: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d, cluttered3d (default: %(default)s)",
+        help="scenario to train on: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d, cluttered3d, armcells (an arm's workcells) (default: %(default)s)",
     )
-    p.add_argument("--robot", help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot)")
+    p.add_argument(
+        "--robot",
+        help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot); panda or ur5 for armcells",
+    )
     p.add_argument(
         "--observation", help="2D: surface, surface-normals (default), interior or image; 3D: global (default) or local"
     )

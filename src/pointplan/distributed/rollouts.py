@@ -49,6 +49,7 @@ class RolloutWorker:
         from ..learning.replay import EpisodeStaging
         from ..learning.train import TrainConfig
         from ..models.actor_critic import Actor
+        from ..models.inputs import goal_dim
         from ..scenes.scenarios import make_scenario
 
         torch.set_num_threads(1)
@@ -63,7 +64,7 @@ class RolloutWorker:
         self.rng = np.random.default_rng(np.random.SeedSequence([c.seed, 0x524159, index]))
         torch.manual_seed(int(self.rng.integers(2**31)))
         obs_shape = tuple(self.core.observer.space.shape)
-        self.actor = Actor(obs_shape, self.robot.twist_dim, self.robot.twist_dim, c.net).eval()
+        self.actor = Actor(obs_shape, goal_dim(self.robot), self.robot.twist_dim, c.net).eval()
         self.weights_version = -1
         self.source = EpisodeSource(self.core, None, 0.0)
         self.source.reset(range(num_envs), self.rng)

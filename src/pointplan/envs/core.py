@@ -147,8 +147,10 @@ class BatchedCore:
         self.goal = np.zeros((e, c))
         self.t = np.zeros(e, dtype=np.int64)
         self.scenes: list[Scene | None] = [None] * e
-        self.low = np.zeros((e, self.robot.dim))
-        self.high = np.ones((e, self.robot.dim))
+        # what the scenes' bounds bound: positions (rigid robots) or joints (an arm)
+        k = self.robot.positions(np.zeros(c)).shape[-1]
+        self.low = np.zeros((e, k))
+        self.high = np.ones((e, k))
         self._world: CollisionWorld | None = None
 
     # ------------------------------------------------------------------ resets

@@ -23,7 +23,7 @@ from ..envs.core import EnvConfig
 from ..models.actor_critic import Actor, NetConfig
 from ..models.checkpoint import to_dict
 from ..models.encoders import EncoderConfig
-from ..models.inputs import goal_input, obs_input
+from ..models.inputs import goal_dim, goal_input, obs_input
 from ..observers import make_observer
 from ..parallel import Interrupted, backend, wants_workers
 from ..robots.base import Robot
@@ -99,7 +99,8 @@ def _plan_demo(job: DemoJob) -> tuple[int, np.ndarray | None]:
     bodies = [scenario.robot.padded(margin), scenario.robot] if margin > 0 else [scenario.robot]
     for body in bodies:
         for a in range(max(1, attempts)):
-            res = BiRRT(body, max_nodes=max_nodes, seed=planner_seed + a * _ATTEMPT_SEED_STRIDE).plan(p)
+            opts: dict[str, Any] = {**body.planner_defaults("birrt"), "max_nodes": max_nodes}  # an arm's joint steps
+            res = BiRRT(body, seed=planner_seed + a * _ATTEMPT_SEED_STRIDE, **opts).plan(p)
             if res.success and (length := path_length(scenario.robot, res.path)) < best_len:
                 best, best_len = res.path, length
         if best is not None:
@@ -395,6 +396,9 @@ class BCConfig:
     #: itself where that finds no path), so that its paths keep their distance from the
     #: obstacles instead of grazing them
     expert_margin: float = field(default=0.0, metadata={"min": 0})
+    #: Bi-RRT node budget of each demonstration (problems it cannot solve within it are
+    #: left out: an arm's unsolvable problems cost seconds per thousand nodes)
+    expert_max_nodes: int = field(default=20000, metadata={"min": 1})
 
 
 def train_bc(
@@ -428,7 +432,7 @@ def train_bc(
         return {"run_dir": str(folder.path), "interrupted": True, "epochs": 0}
     t_demos = time.perf_counter() - t0
     obs_shape = observation_shape(robot, env)
-    actor = Actor(obs_shape, robot.twist_dim, robot.twist_dim, cfg.net).to(torch.device(cfg.device))
+    actor = Actor(obs_shape, goal_dim(robot), robot.twist_dim, cfg.net).to(torch.device(cfg.device))
     opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr)
     losses, wall_before = _restore_bc(ckpt, actor, opt, rng) if ckpt is not None else ([], 0.0)
     if len(losses) >= cfg.epochs:
@@ -566,6 +570,7 @@ def _bc_demos(
         scenario,
         cfg.n_problems,
         cfg.seed,
+        max_nodes=cfg.expert_max_nodes,
         progress=progress,
         workers=cfg.workers,
         address=cfg.address,

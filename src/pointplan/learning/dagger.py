@@ -25,6 +25,7 @@ import torch
 from ..envs.core import EnvConfig
 from ..models.actor_critic import Actor
 from ..models.checkpoint import load_checkpoint, to_dict
+from ..models.inputs import goal_dim
 from ..models.policy import Policy
 from ..scenes.scenarios import Scenario, make_scenario
 from .bc import (
@@ -64,7 +65,7 @@ class DaggerConfig:
     epochs_per_round: float = 2.0
     #: validation problems (``val`` split): after the cloning, and after each DAgger round
     eval_episodes: int = field(default=200, metadata={"min": 1})
-    #: Bi-RRT node budget of the expert
+    #: Bi-RRT node budget of the expert (its labels, and the first demonstrations)
     max_nodes: int = field(default=20000, metadata={"min": 1})
     #: who labels: ``birrt`` (Bi-RRT from the state reached to the goal) or ``slot-threading``
     #: (Slot scenes only: one threading of every slot, :mod:`pointplan.planners.slot_threading`;
@@ -300,7 +301,7 @@ class _DaggerRun:
         self.rng = np.random.default_rng(b.seed)
         torch.manual_seed(b.seed)
         self.obs_shape = observation_shape(self.robot, self.env)
-        self.actor = Actor(self.obs_shape, self.robot.twist_dim, self.robot.twist_dim, b.net).to(b.device)
+        self.actor = Actor(self.obs_shape, goal_dim(self.robot), self.robot.twist_dim, b.net).to(b.device)
         self.opt = torch.optim.Adam(self.actor.parameters(), lr=b.lr)
         self.demos_path = folder.path / "demos.npz"
         self.round, self.best, self.best_nodes, self.wall_before, self.env_steps = 0, -1.0, float("inf"), 0.0, 0

@@ -35,7 +35,7 @@ from ..envs.core import BatchedCore, EnvConfig
 from ..models.actor_critic import Actor, NetConfig
 from ..models.checkpoint import CheckpointError, load_checkpoint, to_dict
 from ..models.encoders import make_encoder, mlp
-from ..models.inputs import goal_input, obs_input
+from ..models.inputs import goal_dim, goal_input, obs_input
 from ..scenes.scenarios import make_scenario
 from ..scenes.scene import Problem
 from .rundir import RunDir, best_note, best_or_none
@@ -207,10 +207,10 @@ class PPORun:
         self.device = torch.device(cfg.device)
         torch.manual_seed(cfg.seed)
         k = self.robot.twist_dim
-        self.actor = Actor(self.obs_shape, k, k, self.net).to(self.device)
+        self.actor = Actor(self.obs_shape, goal_dim(self.robot), k, self.net).to(self.device)
         self.actor.detach_encoder = False
         self.actor.load_state_dict(init["actor"])
-        self.value = ValueNetwork(self.obs_shape, k, self.net).to(self.device)
+        self.value = ValueNetwork(self.obs_shape, goal_dim(self.robot), self.net).to(self.device)
         self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr)
         self.opt_value = torch.optim.Adam(self.value.parameters(), lr=cfg.value_lr)
         self.rng = np.random.default_rng(cfg.seed)
@@ -332,7 +332,7 @@ class PPORun:
         cfg, core, robot = self.cfg, self.core, self.robot
         T, E = steps or cfg.rollout_steps, cfg.num_envs
         obs_b = np.zeros((T, E) + self.obs_shape, np.float32)
-        goal_b = np.zeros((T, E, robot.twist_dim), np.float32)
+        goal_b = np.zeros((T, E, goal_dim(robot)), np.float32)
         u_b = np.zeros((T, E, robot.twist_dim), np.float32)
         logp_b = np.zeros((T, E), np.float32)
         val_b = np.zeros((T, E), np.float32)

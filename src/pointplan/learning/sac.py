@@ -17,7 +17,7 @@ from torch import nn
 
 from ..envs.core import EnvConfig, goal_reached, step_reward
 from ..models.actor_critic import Actor, NetConfig, build_networks
-from ..models.inputs import goal_input, obs_input
+from ..models.inputs import goal_dim, goal_input, obs_input
 from ..robots.base import Robot
 from .replay import Batch
 
@@ -92,8 +92,7 @@ class SAC:
     ) -> None:
         self.robot, self.env, self.cfg, self.net_cfg = robot, env, cfg, net
         self.device = torch.device(device)
-        goal_dim = robot.twist_dim
-        self.actor, self.critic = build_networks(obs_shape, goal_dim, robot.twist_dim, net)
+        self.actor, self.critic = build_networks(obs_shape, goal_dim(robot), robot.twist_dim, net)
         self.actor.to(self.device)
         self.critic.to(self.device)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)

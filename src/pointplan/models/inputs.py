@@ -16,8 +16,18 @@ from ..robots.base import Robot
 
 
 def goal_input(robot: Robot, q: np.ndarray, goal: np.ndarray) -> np.ndarray:
-    """``log(q^-1 goal) / action_scale``: the goal in steps, ``(..., twist_dim)`` float32."""
-    return (robot.goal_vector(q, goal) / robot.action_scale).astype(np.float32)
+    """``log(q^-1 goal) / action_scale``: the goal in steps, then the robot's
+    :meth:`~pointplan.robots.base.Robot.state_features` (none for rigid robots),
+    ``(..., goal_dim(robot))`` float32."""
+    g = (robot.goal_vector(q, goal) / robot.action_scale).astype(np.float32)
+    if not robot.state_feature_dim:
+        return g
+    return np.concatenate([g, robot.state_features(q, goal).astype(np.float32)], -1)
+
+
+def goal_dim(robot: Robot) -> int:
+    """The width of :func:`goal_input`: the twist's, plus the robot's state features."""
+    return int(robot.twist_dim + robot.state_feature_dim)
 
 
 def obs_input(robot: Robot, obs: np.ndarray) -> np.ndarray:

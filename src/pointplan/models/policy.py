@@ -16,7 +16,7 @@ from ..robots import make_robot
 from ..robots.base import Robot
 from .actor_critic import LOG_STD_MAX, LOG_STD_MIN, Actor, NetConfig
 from .checkpoint import CheckpointError, check_compatible, check_weights, load_checkpoint, rebuilding
-from .inputs import goal_input, obs_input
+from .inputs import goal_dim, goal_input, obs_input
 
 
 class Policy:
@@ -53,9 +53,9 @@ class Policy:
             net = from_dict(NetConfig, data["net"])
             shape = tuple(data["obs_shape"])
             with torch.device("meta"):  # the shapes of the weights, allocating nothing
-                expected = Actor(shape, robot.twist_dim, robot.twist_dim, net).state_dict()
+                expected = Actor(shape, goal_dim(robot), robot.twist_dim, net).state_dict()
             check_weights(path, expected, data["actor"], "actor")
-            actor = Actor(shape, robot.twist_dim, robot.twist_dim, net)
+            actor = Actor(shape, goal_dim(robot), robot.twist_dim, net)
             actor.load_state_dict(data["actor"])  # a shared encoder's weights come with the actor
         actor.detach_encoder = False
         meta = {k: v for k, v in data.items() if k not in ("actor", "trainer")}

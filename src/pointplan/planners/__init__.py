@@ -58,10 +58,11 @@ def _hybrid_factory(
     escape: Escape | int | None = None,
     fallback: str = "birrt",
     time_limit: float | None = 10.0,
+    horizon: int | None = None,
     **kw: Any,
 ) -> Planner:
     """The policy (``checkpoint`` or the shipped one, for ``scene`` if one ships), stopped when it stalls (moved less
-    than ``stall_distance`` over ``stall_steps`` steps) or at its horizon, then the
+    than ``stall_distance`` over ``stall_steps`` steps) or at its ``horizon`` (default: the policy's own), then the
     ``fallback`` from its configuration closest to the goal: ``birrt`` (``max_nodes``,
     ``seed``, other keywords) or ``ompl:NAME`` (OMPL's planner with pointplan's certified
     motion checks; other keywords go to :class:`~pointplan.planners.ompl.OMPLPlanner`).
@@ -80,6 +81,7 @@ def _hybrid_factory(
         attempts=attempts,
         action_noise=action_noise,
         escape=escape,
+        horizon=horizon,
     )
     if fallback.lower() == "birrt":
         if max_nodes is None and time_limit is None:

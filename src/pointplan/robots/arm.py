@@ -227,6 +227,24 @@ class ArmRobot(Robot):
     def log(self, q0: Array, q1: Array) -> Array:
         return np.asarray(q1, np.float64) - np.asarray(q0, np.float64)
 
+    @property
+    def state_feature_dim(self) -> int:  # type: ignore[override]
+        return 7 * self.model.n_joints
+
+    def state_features(self, q: Array, goal: Array) -> Array:
+        """The joint state scaled to [-1, 1] by the limits, and the joint frames' origins
+        at ``q`` and at ``goal`` (base frame, in units of one step like the observed
+        points): a policy observing the obstacles in the base frame must know where its
+        links are. ``(..., 7 n)``."""
+        q, goal = np.asarray(q, np.float64), np.asarray(goal, np.float64)
+        lead, n = q.shape[:-1], self.model.n_joints
+        lo, hi = self.model.lower, self.model.upper
+        unit = 2.0 * (q - lo) / (hi - lo) - 1.0
+        both = np.stack(np.broadcast_arrays(q, goal), -2).reshape(-1, n)
+        _, pos = self.model.joint_frames(both)
+        pos = ((pos - self.model.base_pos) @ self.model.base_rot) / self.action_scale[0]
+        return np.concatenate([unit, pos.reshape(lead + (6 * n,))], -1)
+
     def positions(self, q: Array) -> Array:
         """The joint positions: what the scene's bounds (the joint limits) bound."""
         return np.asarray(q, np.float64)

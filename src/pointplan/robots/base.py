@@ -98,6 +98,16 @@ class Robot(ABC):
         """The goal as seen from the robot: ``log(q^-1 goal)`` (body frame)."""
         return self.log(q, goal)
 
+    #: width of :meth:`state_features` (0 for the rigid robots: their observation is in
+    #: the body frame, so the goal vector and the points say where the robot is)
+    state_feature_dim: int = 0
+
+    def state_features(self, q: Array, goal: Array) -> Array:
+        """What a policy is told about the robot beyond the goal vector, ``(..., state_feature_dim)``
+        (an arm observes in its base frame and needs its own joint state)."""
+        q = np.asarray(q, np.float64)
+        return np.zeros(q.shape[:-1] + (0,))
+
     def clip(self, q: Array, low: Array, high: Array) -> Array:
         """Clip positions to the workspace bounds; orientation is free."""
         out = np.array(q, dtype=np.float64, copy=True)

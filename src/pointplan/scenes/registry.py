@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from ..robots.base import Robot
+from .armcells import ArmCellsScenario
 from .base import Scenario
 from .cluttered import Cluttered3DScenario
 from .mbm import MBM_SCENARIOS
@@ -19,6 +20,9 @@ from .scenes3d import SCENARIOS_3D as _SCENES3D_MODULE
 #: the 3D scenarios of the sphere and the S-shape (scenes3d's and the cluttered layouts)
 SCENARIOS_3D: dict[str, Callable[..., Scenario]] = {**_SCENES3D_MODULE, "cluttered3d": Cluttered3DScenario}
 
+#: the arms' own scenarios (MotionBenchMaker's are ``mbm-<scenario>``)
+ARM_SCENARIOS: dict[str, Callable[..., Scenario]] = {"armcells": ArmCellsScenario}
+
 #: the 2D scenarios: 2D-Narrow, its variants (narrow2d-ends, -many, -narrow, -manynarrow), the empty square
 SCENARIOS: dict[str, type[Scenario]] = {"narrow2d": Narrow2DScenario, "empty2d": Empty2DScenario, **VARIANT_SCENARIOS}
 
@@ -26,7 +30,12 @@ SCENARIOS: dict[str, type[Scenario]] = {"narrow2d": Narrow2DScenario, "empty2d":
 def scenario_names() -> list[str]:
     """Every name :func:`make_scenario` knows, as users type it (``narrow2d-ends``; the
     spellings :func:`scenario_key` maps to the same key, ``narrow2dends``, work too)."""
-    return [VARIANT_NAMES.get(k, k) for k in SCENARIOS] + list(SCENARIOS_3D) + [f"mbm-{s}" for s in MBM_NAMES]
+    return (
+        [VARIANT_NAMES.get(k, k) for k in SCENARIOS]
+        + list(SCENARIOS_3D)
+        + list(ARM_SCENARIOS)
+        + [f"mbm-{s}" for s in MBM_NAMES]
+    )
 
 
 def scenario_key(name: str) -> str:
@@ -37,17 +46,21 @@ def scenario_key(name: str) -> str:
 
 def is_3d(name: str) -> bool:
     """Whether ``name`` is one of the 3D scenarios (an arm's included)."""
-    return scenario_key(name) in SCENARIOS_3D or scenario_key(name) in MBM_SCENARIOS
+    key = scenario_key(name)
+    return key in SCENARIOS_3D or key in MBM_SCENARIOS or key in ARM_SCENARIOS
 
 
 def make_scenario(name: str, robot: str | Robot | None = None, **kwargs: object) -> Scenario:
     """A scenario by name: ``narrow2d``, ``empty2d`` (2D disc); ``boxes3d``, ``synthetic3d``,
     ``ycb3d``, ``dynamic3d``, ``slot``, ``qureshi3d`` (``robot``: ``sphere3d`` or ``sshape``);
-    ``mbm-<scenario>`` (MotionBenchMaker; ``robot``: ``panda`` or ``ur5``).
+    ``mbm-<scenario>`` (MotionBenchMaker; ``robot``: ``panda`` or ``ur5``), ``armcells``
+    (random arm workcells, training ground of the arm policy; ``robot``: an arm).
     Also accepts Gymnasium ids such as ``pointplan/Boxes3D-v0``."""
     key = scenario_key(name)
     if key in MBM_SCENARIOS:
         return MBM_SCENARIOS[key](robot=robot)  # type: ignore[no-any-return]
+    if key in ARM_SCENARIOS:
+        return ARM_SCENARIOS[key](robot=robot, **kwargs)
     if key in SCENARIOS_3D:
         return SCENARIOS_3D[key](robot=robot, **kwargs)
     if key in SCENARIOS:

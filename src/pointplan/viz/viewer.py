@@ -161,7 +161,7 @@ def view_problem(
     may pick another port when ``port`` is taken (``server.get_port()`` tells which).
 
     The returned server carries the viewer's handles as ``server.pointplan``, a dict with
-    ``slider``, ``play``, ``robot`` (the moving frame), ``obstacles`` (the current obstacle
+    ``slider``, ``play``, ``robot`` (the moving frame; an arm's batched sphere mesh), ``obstacles`` (the current obstacle
     mesh handles), ``points``, ``timed`` (the configurations per step) and ``show_step``.
     """
     try:
@@ -248,7 +248,37 @@ def _obstacle_drawer(server: Any, handles: dict[str, Any]) -> Callable[[Sequence
     return draw_obstacles
 
 
+def _is_arm(robot: Robot) -> bool:
+    """An articulated arm: its spheres move apart, not as one rigid body."""
+    from ..robots.arm import ArmRobot
+
+    return isinstance(robot, ArmRobot)
+
+
+def _add_arm(server: Any, robot: Robot, name: str, q: Array, color: str, opacity: float | None) -> Any:
+    """An arm's spheres at ``q`` as one batched mesh (one unit icosphere per sphere, placed
+    and scaled); moving it is setting ``batched_positions`` to the centres at a new ``q``."""
+    import trimesh
+
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+    centres = robot.sphere_centers(np.asarray(q, np.float64)[None])[0]  # type: ignore[attr-defined]
+    radii = np.asarray(robot.parts.sphere_radii, np.float32).reshape(-1)
+    return server.scene.add_batched_meshes_simple(
+        name,
+        np.asarray(ball.vertices, np.float32),
+        np.asarray(ball.faces, np.uint32),
+        batched_wxyzs=np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (len(radii), 1)),
+        batched_positions=centres.astype(np.float32),
+        batched_scales=radii,
+        batched_colors=_rgb255(color),
+        opacity=opacity,
+        flat_shading=True,
+    )
+
+
 def _add_body(server: Any, robot: Robot, name: str, q: Array, color: str, opacity: float | None) -> Any:
+    if _is_arm(robot):
+        return _add_arm(server, robot, name, q, color, opacity)
     body = robot_mesh(robot)
     pos, wxyz = robot_pose(robot, q)
     frame = server.scene.add_frame(name, show_axes=False, position=pos, wxyz=wxyz)
@@ -266,12 +296,15 @@ def _add_body(server: Any, robot: Robot, name: str, q: Array, color: str, opacit
 def _fill_scene(server: Any, problem: Problem, robot: Robot, timed: Array) -> dict[str, Any]:
     """Camera, bounds, obstacles, start, goal, path, the moving robot and its points."""
     scene = problem.scene
-    low, high = scene.low, scene.high
+    arm = _is_arm(robot)
+    # an arm's scene bounds its joints; the workspace it covers is what to frame
+    low, high = (scene.workspace_low, scene.workspace_high) if arm else (scene.low, scene.high)  # type: ignore[attr-defined]
     extent = float(np.max(high - low))
     server.scene.set_up_direction("+z")
     centre = (low + high) / 2.0
     server.initial_camera.look_at = tuple(centre)
-    server.initial_camera.position = tuple(centre + np.array([-1.2, -1.6, 1.1]) * extent)
+    # (an arm's workspace box is mostly empty: come closer)
+    server.initial_camera.position = tuple(centre + np.array([-1.2, -1.6, 1.1]) * extent * (0.55 if arm else 1.0))
     server.scene.add_line_segments(
         "/bounds", _bounds_segments(low, high), _rgb255(C_BOUNDS), thickness=1.5, thickness_units="screen"
     )
@@ -290,8 +323,8 @@ def _fill_scene(server: Any, problem: Problem, robot: Robot, timed: Array) -> di
             )
     _add_body(server, robot, "/start", problem.start, C_START, ENDPOINT_OPACITY)
     _add_body(server, robot, "/goal", problem.goal, C_GOAL, ENDPOINT_OPACITY)
-    if len(timed) > 1:
-        pos = robot.positions(timed)
+    if len(timed) > 1:  # the trace of the body frame, of an arm's hand (its last sphere)
+        pos = robot.sphere_centers(timed)[:, -1] if arm else robot.positions(timed)  # type: ignore[attr-defined]
         server.scene.add_line_segments(
             "/path", np.stack([pos[:-1], pos[1:]], 1), _rgb255(C_PATH), thickness=3.0, thickness_units="screen"
         )
@@ -333,9 +366,12 @@ def _add_controls(
     def show_step(t: int) -> None:
         t = int(np.clip(t, 0, n_steps - 1))
         with lock:
-            pos, wxyz = robot_pose(robot, timed[t])
-            robot_frame.position = pos
-            robot_frame.wxyz = wxyz
+            if _is_arm(robot):
+                robot_frame.batched_positions = robot.sphere_centers(timed[t][None])[0].astype(np.float32)  # type: ignore[attr-defined]
+            else:
+                pos, wxyz = robot_pose(robot, timed[t])
+                robot_frame.position = pos
+                robot_frame.wxyz = wxyz
             if scene.dynamic:
                 handles["draw_obstacles"](scene.obstacles_at(t))
             if points_at is not None:
