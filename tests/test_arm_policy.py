@@ -8,12 +8,10 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import coal
 import numpy as np
 import pinocchio as pin
 import pytest
 
-from pointplan.geometry.shapes import Box, Cylinder
 from pointplan.models.inputs import goal_dim, goal_input
 from pointplan.robots.arm import ARMS
 from pointplan.scenes.armcells import KINDS, ArmCellsScenario, cell_of
@@ -27,19 +25,13 @@ def _urdf(arm: str) -> tuple[str, str]:
 
 
 def _collides(arm: str, obstacles: list[Any], q: np.ndarray, robot: Any) -> bool:
-    """pinocchio + coal: does the arm at ``q`` touch an obstacle or itself?"""
-    urdf, folder = _urdf(arm)
-    m = pin.buildModelFromUrdf(urdf)
-    g = pin.buildGeomFromUrdf(m, urdf, pin.GeometryType.COLLISION, package_dirs=[folder])
-    n_robot = len(g.geometryObjects)
-    for k, s in enumerate(obstacles):
-        assert isinstance(s, Box | Cylinder)
-        geom = coal.Box(*s.size) if isinstance(s, Box) else coal.Cylinder(s.radius, s.length)
-        g.addGeometryObject(pin.GeometryObject(f"obstacle{k}", 0, 0, pin.SE3(s.rotation, s.center), geom))
-        for i in range(n_robot):
-            g.addCollisionPair(pin.CollisionPair(i, n_robot + k))
-    for a, b in robot.model.self_pairs:
-        g.addCollisionPair(pin.CollisionPair(int(a), int(b)))
+    """pinocchio + coal (test_arm's set-up): does the arm at ``q`` touch an obstacle or itself?"""
+    from pointplan.scenes.mbm import JointSpaceScene
+    from pointplan.scenes.scene import Problem
+    from test_arm import _pinocchio
+
+    problem = Problem(JointSpaceScene(obstacles, robot.lower, robot.upper), q, q)
+    m, g = _pinocchio(arm, problem, robot)
     d, gd = m.createData(), pin.GeometryData(g)
     return bool(pin.computeCollisions(m, d, g, gd, q, True))
 
