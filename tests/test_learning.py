@@ -660,6 +660,32 @@ def test_expert_attempts_keep_the_shortest_solution() -> None:
         generate_demos(scenario, 2, seed=0, progress=False, attempts=0)
 
 
+def test_ctrl_c_while_planning_demonstrations_in_turn_keeps_those_that_finished(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Planned in this process (no workers), a Ctrl-C during the fourth problem keeps the
+    three solved before it, exactly as an uninterrupted run solved them."""
+    import pointplan.learning.bc as bc
+
+    scenario = Narrow2DScenario()
+    full = dict(generate_demos(scenario, 6, seed=0, progress=False).paths)
+    plan = bc._plan_demo
+    calls = []
+
+    def stopped_at_fourth(job: bc.DemoJob) -> tuple[int, np.ndarray | None]:
+        calls.append(job)
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+        return plan(job)
+
+    monkeypatch.setattr(bc, "_plan_demo", stopped_at_fourth)
+    kept = generate_demos(scenario, 6, seed=0, progress=False).paths
+    assert len(kept) == 3 and len(calls) == 4
+    for k, path in kept:
+        np.testing.assert_array_equal(path, full[k])
+    assert "keeping the 3 of 6 demonstrations" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("robot_name", ["sphere3d", "sshape"])
 def test_padded_robot_collides_exactly_within_the_margin(robot_name: str) -> None:
     """``Robot.padded(m)`` collides wherever the body's exact clearance (coal) is below ``m``;

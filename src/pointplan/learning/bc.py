@@ -167,8 +167,11 @@ def plan_demos(
         finally:
             if live_bar is not None:
                 live_bar.close()
+    elif pool is not None:
+        results = pool.map(_plan_demo, jobs, chunksize=8)
     else:
-        results = pool.map(_plan_demo, jobs, chunksize=8) if pool is not None else map(_plan_demo, jobs)
+        results = _plan_in_turn(jobs, bar)
+        bar = None  # (advanced by _plan_in_turn)
     for index, path in results:
         if path is not None and len(path) > 1:
             out.append((index, path))
@@ -177,6 +180,22 @@ def plan_demos(
     if bar is not None:
         bar.close()
     return out
+
+
+def _plan_in_turn(jobs: list[DemoJob], bar: Any) -> list[tuple[int, np.ndarray | None]]:
+    """Plan the jobs one after the other in this process; Ctrl-C keeps those that finished."""
+    results: list[tuple[int, np.ndarray | None]] = []
+    try:
+        for job in jobs:
+            results.append(_plan_demo(job))
+            if bar is not None:
+                bar.update()
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: keeping the {len(results)} of {len(jobs)} demonstrations that finished", file=sys.stderr)
+    finally:
+        if bar is not None:
+            bar.close()
+    return results
 
 
 def generate_demos(

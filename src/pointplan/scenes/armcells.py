@@ -246,15 +246,12 @@ class ArmCellsScenario(Scenario):
         cell = cell_of(scene)
         if cell is None:
             return super().sample_problem(scene, rng)
-        first: tuple[Array, Array] | None = None
-        for _ in range(self.problem_tries):
-            pair = self._draw_pair(scene, cell, rng)
-            if pair is None:
-                continue
-            if not self.straight_free(scene, *pair):
-                return pair
-            first = first or pair
-        return first if first is not None else super().sample_problem(scene, rng)
+        pair = self.first_blocked_pair(
+            lambda: self._draw_pair(scene, cell, rng),
+            lambda a, b: self.straight_free(scene, a, b),
+            self.problem_tries,
+        )
+        return pair if pair is not None else super().sample_problem(scene, rng)
 
     def _draw_pair(self, scene: Scene, cell: Cell, rng: np.random.Generator) -> tuple[Array, Array] | None:
         regions = [cell.inside[i] for i in rng.permutation(len(cell.inside))]

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import zlib
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -46,6 +46,24 @@ class Scenario(ABC):
         """A collision-free start and goal drawn uniformly in ``scene``."""
         q = self.robot.sample_free(scene.world, rng, 2, scene.low, scene.high)
         return q[0], q[1]
+
+    @staticmethod
+    def first_blocked_pair(
+        draw: Callable[[], tuple[np.ndarray, np.ndarray] | None],
+        straight_free: Callable[[np.ndarray, np.ndarray], bool],
+        tries: int,
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Of ``tries`` pairs from ``draw`` (``None``: a draw that failed), the first whose
+        straight line is not free, else the first pair drawn, else ``None``."""
+        first: tuple[np.ndarray, np.ndarray] | None = None
+        for _ in range(tries):
+            pair = draw()
+            if pair is None:
+                continue
+            if not straight_free(*pair):
+                return pair
+            first = first or pair
+        return first
 
     def problem(self, split: str, index: int, seed: int = 0) -> Problem:
         """Problem ``index`` of ``split``: workspace ``index``, start and goal drawn from

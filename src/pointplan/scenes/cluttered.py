@@ -394,15 +394,12 @@ class Cluttered3DScenario(Scenario3D):
         layout = layout_of(scene)
         if layout is None:
             return super().sample_problem(scene, rng)
-        first: tuple[Array, Array] | None = None
-        for _ in range(self.layouts.problem_tries):
-            pair = self._draw_pair(scene, layout, rng)
-            if pair is None:
-                continue
-            if not self.straight_free(scene, *pair):
-                return pair
-            first = first or pair
-        return first if first is not None else super().sample_problem(scene, rng)
+        pair = self.first_blocked_pair(
+            lambda: self._draw_pair(scene, layout, rng),
+            lambda a, b: self.straight_free(scene, a, b),
+            self.layouts.problem_tries,
+        )
+        return pair if pair is not None else super().sample_problem(scene, rng)
 
     def _draw_pair(self, scene: Scene, layout: Layout, rng: np.random.Generator) -> tuple[Array, Array] | None:
         inside = [layout.inside[i] for i in rng.permutation(len(layout.inside))]
