@@ -307,13 +307,19 @@ def observe_demos(
     """Observations of every demonstration step (the observer's random subsets are drawn
     anew on every call, so calling again gives a fresh augmentation)."""
     kwargs: dict[str, Any] = {} if env.observation == "image" else {"n_points": env.n_points}
-    out = []
+    name = env.observation or ("surface-normals" if robot.dim == 2 else "global")
+    out: np.ndarray | None = None  # filled chunk by chunk (a million steps of 256 points: 6 GB)
     for c in range(0, len(demos), chunk):
         sl = slice(c, c + chunk)
-        obs = make_observer(env.observation or ("surface-normals" if robot.dim == 2 else "global"), robot, **kwargs)
+        obs = make_observer(name, robot, **kwargs)
         obs.bind([demos.problems[j].scene for j in demos.scene[sl]])
-        out.append(obs.observe(demos.q[sl], rng))
-    return np.concatenate(out)
+        part = obs.observe(demos.q[sl], rng)
+        if out is None:
+            out = np.empty((len(demos), *part.shape[1:]), part.dtype)
+        out[sl] = part
+    if out is None:
+        raise ValueError("no demonstration steps to observe")
+    return out
 
 
 def demo_episodes(
@@ -700,7 +706,8 @@ def fit_actor(
     obs = None
     for ep in passes:
         if obs is None or (refresh_every and ep % refresh_every == 0):
-            obs = torch.as_tensor(obs_input(robot, observe_demos(demos, robot, env, rng)), device=device)
+            obs = None  # (the old subsets freed first: one copy of them in memory at a time)
+            obs = torch.as_tensor(obs_input(robot, observe_demos(demos, robot, env, rng), copy=False), device=device)
         n = len(demos) if ep + 1 <= epochs else int(len(demos) * (epochs - ep))
         perm = torch.as_tensor(rng.permutation(len(demos))[:n], device=device)
         total, stopped = 0.0, False

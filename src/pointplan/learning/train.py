@@ -310,7 +310,7 @@ def _demo_batch(run: _Run) -> DemoBatch | None:
     agent, cfg = run.agent, run.cfg
     if run.demo_obs is None or agent.updates - run.demo_drawn_at >= cfg.demo_refresh:
         robot = run.scenario.robot
-        run.demo_obs = agent.tensor(obs_input(robot, observe_demos(run.demos, robot, run.env_cfg, run.rng)))
+        run.demo_obs = agent.tensor(obs_input(robot, observe_demos(run.demos, robot, run.env_cfg, run.rng), copy=False))
         run.demo_drawn_at = agent.updates
     idx = torch.as_tensor(run.rng.integers(0, len(run.demos), cfg.sac.batch_size), device=agent.device)
     return DemoBatch(run.demo_obs[idx], run.demo_goal[idx], run.demo_action[idx])

@@ -30,11 +30,12 @@ def goal_dim(robot: Robot) -> int:
     return int(robot.twist_dim + robot.state_feature_dim)
 
 
-def obs_input(robot: Robot, obs: np.ndarray) -> np.ndarray:
-    """Point observations ``(..., N, F)`` with positions in steps; images unchanged."""
+def obs_input(robot: Robot, obs: np.ndarray, copy: bool = True) -> np.ndarray:
+    """Point observations ``(..., N, F)`` with positions in steps; images unchanged.
+    ``copy=False`` scales a float32 ``obs`` in place (for arrays too large to copy)."""
     obs = np.asarray(obs, np.float32)
     if obs.ndim >= 3 and obs.shape[-1] in (robot.dim, 2 * robot.dim) and obs.shape[-2] != obs.shape[-1]:
-        out = obs.copy()
+        out = obs.copy() if copy else obs
         out[..., : robot.dim] /= np.float32(robot.action_scale[0])
         return out
     return obs
