@@ -113,6 +113,42 @@ def test_start_closer_than_the_growth_can_still_move_away() -> None:
     assert collided[0] and np.array_equal(new_q[0], start)
 
 
+def test_a_move_slid_along_the_border_is_never_longer_than_one_action() -> None:
+    """The S-shape pushed against the workspace's border: aimed at its clipped end pose,
+    the move's SE(3) log can exceed one action in a translation coordinate (22 of these
+    4,000 draws); it is shortened to one action, so that executed in time (the
+    evaluator's clock, ``timed_path``) it still takes one step, and it ends inside the
+    bounds on the same geodesic."""
+    from pointplan.evaluation.evaluate import timed_path
+
+    robot = SShape()
+    low, high = np.full(3, -0.6), np.full(3, 0.6)
+    rng = np.random.default_rng(0)
+    n = 4000
+    world = Scene([], low, high).world
+    q = robot.sample_free(world, rng, n, low, high)
+    q[:, :3] = np.clip(q[:, :3], -0.56, 0.56)  # near the border
+    q[:, :3] = np.where(np.abs(q[:, :3]) > 0.5, np.sign(q[:, :3]) * 0.56, q[:, :3])
+    action = rng.uniform(-1, 1, (n, 6))
+    action[np.arange(n), rng.integers(0, 6, n)] = rng.choice([-1.0, 1.0], n)  # at the limit on one axis
+    twist = action * robot.action_scale
+    target = robot.integrate(q, twist)
+    aimed = robot.log(q, robot.clip(target, low, high))
+    longer = np.max(np.abs(aimed) / robot.action_scale, axis=-1) > 1 + 1e-9
+    assert longer.sum() >= 10  # the case arises
+    new_q, _, _ = q_free(robot, world, q, twist, np.tile(low, (n, 1)), np.tile(high, (n, 1)))
+    done = robot.log(q, new_q)
+    assert np.all(np.max(np.abs(done) / robot.action_scale, axis=-1) <= 1 + 1e-9)
+    assert all(len(timed_path(robot, np.stack([a, b]))) == 2 for a, b in zip(q[longer], new_q[longer]))
+    assert np.all(robot.positions(new_q) >= low - 1e-9) and np.all(robot.positions(new_q) <= high + 1e-9)
+    # the shortened move lies along the aimed one: the same direction in the twist space
+    cos = np.sum(done[longer] * aimed[longer], -1) / (
+        np.linalg.norm(done[longer], axis=-1) * np.linalg.norm(aimed[longer], axis=-1) + 1e-300
+    )
+    moved = np.linalg.norm(done[longer], axis=-1) > 1e-9
+    np.testing.assert_allclose(cos[moved], 1.0, atol=1e-9)
+
+
 def test_moving_box_onto_the_start_is_a_collision() -> None:
     """The issue's case: free at t = 4, inside a box at t = 5; the move escapes the box."""
     sc = make_scenario("dynamic3d", robot="sphere3d")

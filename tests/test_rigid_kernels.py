@@ -111,7 +111,7 @@ def test_moves_and_edges_are_q_free_and_edge_free(planner: object, problems: lis
             tw = rng.uniform(-1, 1, 6) * robot.action_scale * rng.choice([0.1, 1.0, 3.0])
             ref_q, ref_hit, ref_n = q_free(robot, p.scene.world, q[None], tw[None], low[None], high[None], 0.01)
             new_q = np.empty(7)
-            hit, n = RK._move(q, tw, 0.01, True, low, high, compiled.body, boxes, ws, new_q)
+            hit, n = RK._move(q, tw, 0.01, True, low, high, compiled.body, boxes, ws, new_q, robot.action_scale)
             assert (hit, n) == (bool(ref_hit[0]), int(ref_n[0]))
             assert np.array_equal(new_q, ref_q[0])
             b = qs[(i + 1) % len(qs)] if i % 5 else q

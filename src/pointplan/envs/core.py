@@ -74,8 +74,10 @@ def q_free(
     ``q: (E, config_dim)``, ``twist: (E, twist_dim)``, ``world`` stacked over ``E`` (or a
     single world), ``low, high: (E, d)``. With ``clip_target`` (the default) a move whose
     end leaves the bounds is sent to its end clipped into the bounds instead (the twist
-    becomes ``log(q^-1 clip(q exp(twist)))``), so a robot pushing against the border slides
-    along it, like the paper's clipping, but on a path that is checked. The bounds then
+    becomes ``log(q^-1 clip(q exp(twist)))``, shortened where it would be a longer step
+    than ``twist`` in units of ``robot.action_scale``: one action stays one time step), so a
+    robot pushing against the border slides along it, like the paper's clipping, but on a
+    path that is checked. The bounds then
     stop a move like an obstacle does (only an SE(3) screw motion can bulge out on its way),
     without counting as a collision: the robot ends at the last sub-step before the first
     one that collides or leaves the bounds. So the executed motion is always a piece of one
@@ -97,7 +99,14 @@ def q_free(
         moved = np.any(clipped != target, axis=-1)
         if moved.any():  # aim at the clipped target instead: slide along the border, checked
             twist = twist.copy()
-            twist[moved] = robot.log(q[moved], clipped[moved])
+            scale = np.asarray(robot.action_scale, np.float64)
+            aimed = robot.log(q[moved], clipped[moved])
+            # never a longer step than the one commanded (in actions, the evaluator's clock):
+            # an SE(3) log aimed at the clipped pose can exceed it in a translation coordinate
+            cap = np.maximum(np.max(np.abs(twist[moved]) / scale, axis=-1), 1.0)
+            size = np.max(np.abs(aimed) / scale, axis=-1)
+            f = np.where(size > cap, cap / np.where(size > 0, size, 1.0), 1.0)
+            twist[moved] = aimed * f[:, None]
     n = intervals(np.linalg.norm(twist, axis=-1), substep)
     chk = robot.check_motions(world, q, twist, n, low, high)
     rows = np.arange(q.shape[0])

@@ -99,7 +99,7 @@ _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
 
 @_jit
-def _move(q, tw, substep, clip_target, low, high, body, boxes, ws, new_q):  # type: ignore[no-untyped-def]
+def _move(q, tw, substep, clip_target, low, high, body, boxes, ws, new_q, scale):  # type: ignore[no-untyped-def]
     """``q_free`` for one robot: ``(collided, checks)``, the new configuration in ``new_q``."""
     poses, twists = ws[8], ws[9]
     if clip_target:
@@ -111,9 +111,19 @@ def _move(q, tw, substep, clip_target, low, high, body, boxes, ws, new_q):  # ty
             if c != target[a]:
                 moved = True
                 target[a] = c
-        if moved:  # aim at the clipped target: slide along the border
+        if moved:  # aim at the clipped target: slide along the border, never a longer step
+            cap = 1.0
+            for i in range(6):
+                cap = max(cap, abs(tw[i]) / scale[i])
             _log(q, target, twists[0])
             tw = twists[0]
+            size = 0.0
+            for i in range(6):
+                size = max(size, abs(tw[i]) / scale[i])
+            if size > cap:
+                f = cap / size
+                for i in range(6):
+                    tw[i] = tw[i] * f
     n = max(1, math.ceil(_norm(tw) / substep - _GRID_SLACK))
     k, collided, checks = _check_motion(q, tw, n, True, low, high, body, boxes, ws, new_q)
     if k <= 0:
@@ -347,11 +357,11 @@ def _act(  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _r_move(kind, q, tw, substep, clip_target, low, high, radius, body, boxes, ws, new_q):  # type: ignore[no-untyped-def]
+def _r_move(kind, q, tw, substep, clip_target, low, high, radius, body, boxes, ws, new_q, scale):  # type: ignore[no-untyped-def]
     """``q_free`` of one step of the ball or the body: ``(collided, checks)``."""
     if kind == BALL:
         return _q_free(q, tw, radius, low, high, boxes[0], boxes[1], boxes[2], substep, clip_target, new_q)
-    return _move(q, tw, substep, clip_target, low, high, body, boxes, ws, new_q)
+    return _move(q, tw, substep, clip_target, low, high, body, boxes, ws, new_q, scale)
 
 
 @_jit
@@ -506,7 +516,7 @@ def rollout_rigid(  # type: ignore[no-untyped-def]
             left -= 1
         for i in range(adim):
             tw[i] = np.float64(min(max(a[i], np.float32(-1.0)), np.float32(1.0))) * scale[i]
-        collided, c = _r_move(kind, q, tw, substep, clip_target, low, high, radius, body, boxes, ws, path[t + 1])
+        collided, c = _r_move(kind, q, tw, substep, clip_target, low, high, radius, body, boxes, ws, path[t + 1], scale)
         checks += c
         t += 1
         new_q = path[t]
