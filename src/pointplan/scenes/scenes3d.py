@@ -186,9 +186,18 @@ class YCB3DScenario(Scenario3D):
 
 class Dynamic3DScenario(Scenario3D):
     """3D-Dynamic: 3D-Boxes whose boxes move between two placements drawn from the same
-    layout (centre and orientation), there and back over ``period`` steps (the horizon)."""
+    layout (centre and orientation), there and back over ``period`` steps (default: the
+    horizon; twice the horizon is one way, the second placement reached at the horizon)."""
 
     name = "dynamic3d"
+
+    def __init__(
+        self, robot: str | Robot | None = None, config: BoxesConfig | None = None, period: int | None = None
+    ) -> None:
+        super().__init__(robot, config)
+        if period is not None and period < 1:
+            raise ValueError(f"period must be a positive number of steps, not {period}")
+        self.period = int(period) if period is not None else self.horizon
 
     def build(self, rng: np.random.Generator, split: str) -> Scene:
         n, sizes, centers, rots = self._layout(rng)
@@ -200,7 +209,7 @@ class Dynamic3DScenario(Scenario3D):
             [Box(targets_c[i], sizes[i], targets_r[i]) for i in range(n)],
             LOW,
             HIGH,
-            period=self.horizon,
+            period=self.period,
         )
 
     def sample_problem(self, scene: Scene, rng: np.random.Generator) -> tuple[Array, Array]:
