@@ -189,6 +189,22 @@ def test_qureshi_sizes_are_permuted_at_fixed_centres() -> None:
     assert not test & train
 
 
+def test_dynamic_period_one_way_reaches_the_second_placement_at_the_horizon() -> None:
+    """``period=2 * horizon``: the same two placements, the second reached at the horizon;
+    a period under one step is refused."""
+    from pointplan.scenes.scenes3d import Dynamic3DScenario
+
+    default, one_way = Dynamic3DScenario(), Dynamic3DScenario(period=160)
+    a, b = default.scene("test", 2), one_way.scene("test", 2)
+    assert isinstance(b, DynamicScene) and a.period == 80 and b.period == 160
+    np.testing.assert_array_equal(a.obstacles[0].center, b.obstacles[0].center)
+    np.testing.assert_array_equal(a.targets[0].center, b.targets[0].center)
+    np.testing.assert_allclose(b.obstacles_at(80)[0].center, b.targets[0].center, atol=1e-12)
+    np.testing.assert_allclose(b.obstacles_at(40)[0].center, a.obstacles_at(20)[0].center, atol=1e-12)
+    with pytest.raises(ValueError, match="period"):
+        Dynamic3DScenario(period=0)
+
+
 def test_dynamic_obstacles_follow_the_clock() -> None:
     sc = make_scenario("dynamic3d")
     scene = sc.scene("test", 2)
