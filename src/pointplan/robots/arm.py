@@ -204,10 +204,10 @@ class ArmRobot(Robot):
     def planner_defaults(self, planner: str) -> dict[str, float]:
         """Longer steps than the rigid robots' 0.07 (a joint-space radian moves the hand
         less than a metre): Bi-RRT's ``step`` and OMPL's ``range``."""
+        if planner.startswith("ompl:") or planner == "hybrid-ompl":  # (OMPL's fallback)
+            return {"range": self.STEP, "resolution": self.RESOLUTION}
         if planner == "birrt" or planner.startswith("hybrid"):
             return {"step": self.STEP, "resolution": self.RESOLUTION}
-        if planner.startswith("ompl:"):
-            return {"range": self.STEP, "resolution": self.RESOLUTION}
         if planner == "straight":
             return {"resolution": self.RESOLUTION}
         return {}
