@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from pointplan.evaluation import check_path, evaluate
-from pointplan.models.inputs import goal_input, obs_input
+from pointplan.models.inputs import goal_dim, goal_input, obs_input
 from pointplan.models.policy import NumpyPointNetActor, Policy, shipped_checkpoint
 from pointplan.observers import make_observer
 from pointplan.planners import make_planner
@@ -163,7 +163,7 @@ def test_goal_and_obs_inputs_unchanged() -> None:
     assert np.allclose(obs_input(robot, obs)[0, :, :2], 1 / 0.07)
 
 
-@pytest.mark.parametrize("robot_name", ["sphere3d", "sshape"])
+@pytest.mark.parametrize("robot_name", ["sphere3d", "sshape", "sshape-oriented"])
 def test_one_robot_rollout_in_3d_matches_the_batched_one(robot_name: str) -> None:
     from pointplan.models.actor_critic import Actor, NetConfig
     from pointplan.models.encoders import EncoderConfig
@@ -175,7 +175,7 @@ def test_one_robot_rollout_in_3d_matches_the_batched_one(robot_name: str) -> Non
     torch.manual_seed(0)
     actor = Actor(
         (64, 6),
-        robot.twist_dim,
+        goal_dim(robot),
         robot.twist_dim,
         NetConfig(EncoderConfig("pointnet", 32, 2), head_width=32, head_layers=2),
     )
@@ -220,7 +220,7 @@ def _weak_sphere_policy(horizon: int = 15):  # type: ignore[no-untyped-def]
     torch.manual_seed(1)
     actor = Actor(
         (64, 6),
-        robot.twist_dim,
+        goal_dim(robot),
         robot.twist_dim,
         NetConfig(EncoderConfig("pointnet", 32, 2), head_width=32, head_layers=2),
     )
@@ -468,3 +468,41 @@ def test_rollouts_can_go_on_after_a_moving_box_hits_the_robot() -> None:
         else:
             assert b.info["crushed"] == 0 and a.success == b.success
             np.testing.assert_array_equal(a.path, b.path)
+
+
+def test_the_oriented_sshape_is_told_the_world_axes_and_shares_the_sshapes_demonstrations(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """``sshape-oriented``: the S-shape's body and motion, and the world's axes in the body
+    frame beside the goal vector (checked against scipy's rotations); demonstrations of
+    the plain S-shape load for it, a plain S-shape policy is refused."""
+    from scipy.spatial.transform import Rotation
+
+    from pointplan.learning.bc import demos_from_paths, load_demos, resample_path, save_demos
+    from pointplan.robots import make_robot
+    from pointplan.scenes.scenarios import make_scenario
+
+    plain, oriented = make_robot("sshape"), make_robot("sshape-oriented")
+    assert oriented.body == plain.body == plain.name == "sshape" and oriented.name == "sshape-oriented"
+    assert goal_dim(plain) == 6 and goal_dim(oriented) == 15
+    rng = np.random.default_rng(3)
+    q = np.concatenate([rng.uniform(-0.5, 0.5, (50, 3)), plain.sample_orientation(rng, 50)], 1)
+    g = np.concatenate([rng.uniform(-0.5, 0.5, (50, 3)), plain.sample_orientation(rng, 50)], 1)
+    gi = goal_input(oriented, q, g)
+    np.testing.assert_array_equal(gi[:, :6], goal_input(plain, q, g))
+    to_body = Rotation.from_quat(q[:, 3:]).inv()
+    expected = np.concatenate([to_body.apply(np.tile(axis, (50, 1))) for axis in np.eye(3)], 1)
+    np.testing.assert_allclose(gi[:, 6:], expected, atol=1e-6)
+    np.testing.assert_allclose(oriented.integrate(q, g[:, :6]), plain.integrate(q, g[:, :6]))
+    # the plain S-shape's demonstrations serve the oriented one (same configurations)
+    sc_plain, sc_oriented = make_scenario("slot", robot="sshape"), make_scenario("slot", robot="sshape-oriented")
+    p = sc_plain.problem("train", 0, seed=0)
+    demos = demos_from_paths(sc_plain, "train", 0, [(0, resample_path(plain, np.stack([p.start, p.goal])))])
+    save_demos(tmp_path / "d.npz", sc_plain, demos, "train", 0)
+    loaded = load_demos(tmp_path / "d.npz", sc_oriented)
+    np.testing.assert_array_equal(loaded.paths[0][1], demos.paths[0][1])
+    with pytest.raises(ValueError, match="demonstrations of"):
+        load_demos(tmp_path / "d.npz", make_scenario("slot", robot="sphere3d"))
+    # a plain S-shape policy is not one for the oriented S-shape
+    from pointplan.planners.policy import PolicyPlanner
+
+    with pytest.raises(ValueError, match="trained for robot 'sshape'"):
+        PolicyPlanner(Policy.from_checkpoint(shipped_checkpoint("sshape", "global")), robot=oriented)

@@ -37,6 +37,7 @@ CLONES = {
     ("sshape_local_policy", 1): "sshape_local_bc_roadmap.pt",
     ("sshape_global_policy", 1): "sshape_global_bc_roadmap.pt",
     ("slotmoving_sshape_local_policy", 1): "slotmoving_local_bc_threading.pt",
+    ("slot_sshape_oriented_local_policy", 1): "slot_oriented_local_bc_threading.pt",
 }
 
 

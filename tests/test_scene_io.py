@@ -376,7 +376,7 @@ CASES_2D = [
     ("bounds.high", [1, 10**400], "bounds.high", "expected 2 numbers"),
     ("bounds.extra", 1, "bounds.extra", "unknown field for bounds"),
     ("obstacle", [], "obstacle", "unknown field for a scene file"),
-    ("robot", "tank", "robot", 'unknown robot "tank"; known: disc2d, sphere3d, sshape'),
+    ("robot", "tank", "robot", 'unknown robot "tank"; known: disc2d, sphere3d, sshape, sshape-oriented'),
     ("robot", 7, "robot", "unknown robot 7"),
     ("robot", "sshape", "robot", "sshape is a 3D robot but the scene is 2D"),
     ("name", 5, "name", "expected a string"),

@@ -359,7 +359,7 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument("--scene", help="plan on a scene file (JSON, see docs/scenes.md) instead of --env")
     p.add_argument(
         "--robot",
-        help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot), panda or ur5 for mbm-* and armcells, or the robot of a scene file that names none",
+        help="sphere3d, sshape or sshape-oriented (the S-shape told its orientation) for the 3D scenarios (default: sphere3d; sshape for slot), panda or ur5 for mbm-* and armcells, or the robot of a scene file that names none",
     )
     p.add_argument(
         "--planner",
@@ -1506,7 +1506,7 @@ def _add_net(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--robot",
-        help="sphere3d or sshape for the 3D scenarios (default: sphere3d; sshape for slot); panda or ur5 for armcells",
+        help="sphere3d, sshape or sshape-oriented (the S-shape told its orientation) for the 3D scenarios (default: sphere3d; sshape for slot); panda or ur5 for armcells",
     )
     p.add_argument(
         "--observation", help="2D: surface, surface-normals (default), interior or image; 3D: global (default) or local"

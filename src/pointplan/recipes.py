@@ -324,6 +324,39 @@ RECIPES: dict[str, Recipe] = {
             cost="about 1 hour: demonstrations about 4 minutes, cloning 32, the curriculum 25 (307,200 steps, one core)",
         ),
         Recipe(
+            name="slot_sshape_oriented_local_policy",
+            shipped="slot_sshape_oriented_local_policy.pt",
+            title="the S-shape told its orientation (sshape-oriented), local policy in the paper's Slot: the threading expert's demonstrations, cloning, then PPO on a reverse curriculum",
+            description=(
+                "The slot threading expert's demonstrations of 3,000 Slot training problems (the gate fixed at the wall's centre; 2,914 threaded), "
+                "the local clone of the S-shape told its orientation (the world's axes in the body frame beside the goal; 20 epochs, separate "
+                "encoders, the spread fitted: checkpoints/slot_oriented_local_bc_threading.pt), then PPO with the reverse curriculum and the "
+                "greedy goal test, the settings of the moving-gate Slot's recipe (docs/results/slot.md; docs/notebook/slot.md). The shipped file "
+                "is the curriculum's best by its own validation with the escape; the run went on to 1e6 steps, then was resumed to 2e6 "
+                "(--resume with --steps 2000000). Here --steps stops it at the shipped step."
+            ),
+            steps=(
+                _step(
+                    "python scripts/slot_expert.py demos --env slot --save-demos {root}/demos_slot.npz --problems {3000|6}",
+                    "the threading expert's demonstrations of 3,000 Slot training problems (slots narrower than the template are left out)",
+                ),
+                _step(
+                    "pointplan bc --env slot --robot sshape-oriented --observation local --encoder-sharing separate --epochs {20|1} "
+                    "--spread-weight 1 --demos {root}/demos_slot.npz --eval-episodes {200|2} --run-dir {root}/bc_local",
+                    "the clone with its spread: 20 epochs",
+                ),
+                _step(
+                    "pointplan ppo --init-actor {root}/bc_local/bc.pt --start-demos {root}/demos_slot.npz --greedy-goal --lr 1e-4 "
+                    "--reward-collision -0.1 --action-cost 0 --lam 0.98 --entropy-coef 0 --select escape --eval-every {102400|64} "
+                    "--eval-episodes {100|2} --steps {1230400|128} --threads 1 --run-dir {root}/rc_local",
+                    "PPO on the reverse curriculum: episodes start on the demonstrations, near their goal first",
+                    "--num-envs 4 --rollout-steps 16 --value-warmup 1",
+                ),
+            ),
+            product=("rc_local/best.pt",),
+            cost="about 47 minutes of one core (beside another job): demonstrations 5 minutes, cloning 10, the curriculum 32 (1,230,400 steps)",
+        ),
+        Recipe(
             name="narrow2d_mpnet",
             shipped="narrow2d_mpnet.pt",
             title="MPNet's networks for the disc in 2D-Narrow",

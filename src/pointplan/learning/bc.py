@@ -285,7 +285,7 @@ def save_demos(path: str | Path, scenario: Scenario, demos: Demos, split: str, s
 def load_demos(path: str | Path, scenario: Scenario) -> Demos:
     """Demonstrations saved by :func:`save_demos` (the problems are rebuilt from their indices)."""
     with np.load(path, allow_pickle=False) as f:
-        if str(f["env"]) != scenario.name or str(f["robot"]) != scenario.robot.name:
+        if str(f["env"]) != scenario.name or str(f["robot"]) not in (scenario.robot.name, scenario.robot.body):
             raise ValueError(
                 f"{path}: demonstrations of {f['env']} / {f['robot']}, not {scenario.name} / {scenario.robot.name}"
             )

@@ -215,14 +215,15 @@ SHIPPED: dict[tuple[str, str], str] = {
     ("sshape", "global"): "sshape_global_policy.pt",
 }
 #: policies trained for one scene, taken there before the 3D-Boxes ones: (robot,
-#: observation, scenario) -> file in ``pointplan/data``: the moving-gate Slot's (trained
-#: there; docs/results/slot.md).
+#: observation, scenario) -> file in ``pointplan/data``: the moving-gate Slot's, and the
+#: paper's Slot's for the S-shape told its orientation (trained there; docs/results/slot.md).
 SHIPPED_FOR_SCENE: dict[tuple[str, str, str], str] = {
     ("sshape", "local", "slotmoving"): "slotmoving_sshape_local_policy.pt",
+    ("sshape-oriented", "local", "slot"): "slot_sshape_oriented_local_policy.pt",
 }
 #: the observation a robot's policy uses when none is asked for (the better of the two on
 #: the validation problems where both ship; docs/results/README.md)
-DEFAULT_OBSERVATION = {"disc2d": "surface-normals", "sphere3d": "global", "sshape": "local"}
+DEFAULT_OBSERVATION = {"disc2d": "surface-normals", "sphere3d": "global", "sshape": "local", "sshape-oriented": "local"}
 
 
 def shipped_policies() -> list[tuple[str, str]]:

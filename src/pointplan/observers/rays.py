@@ -35,7 +35,7 @@ def wall_slabs(low: Array, high: Array, thickness: float = WALL_THICKNESS) -> li
 def ray_origins(robot: Robot) -> Array:
     """Body-frame points the rays start from: the centre for balls, the centreline corners
     of the S-shape (6 points along its body)."""
-    if robot.name == "sshape":
+    if robot.body == "sshape":
         from ..robots.sshape import S_CORNERS
 
         return S_CORNERS.copy()

@@ -127,7 +127,7 @@ class OMPLPlanner:
         seed: int | None = None,
     ) -> None:
         _ompl()
-        if not (robot.euclidean or robot.name == "sshape"):
+        if not (robot.euclidean or robot.body == "sshape"):
             raise ValueError(f"no OMPL state space for robot {robot.name!r}")
         if motion_check not in ("pointplan", "ompl"):
             raise ValueError(f"motion_check must be 'pointplan' or 'ompl', not {motion_check!r}")
@@ -149,18 +149,18 @@ class OMPLPlanner:
 
     # ------------------------------------------------------------------ states
     def _space(self, ob: Any, low: np.ndarray, high: np.ndarray) -> Any:
-        d = self.robot.dim if self.robot.name == "sshape" else self.robot.config_dim
+        d = self.robot.dim if self.robot.body == "sshape" else self.robot.config_dim
         bounds = ob.RealVectorBounds(d)
         for i in range(d):
             bounds.setLow(i, float(low[i]))
             bounds.setHigh(i, float(high[i]))
-        space = ob.SE3StateSpace() if self.robot.name == "sshape" else ob.RealVectorStateSpace(d)
+        space = ob.SE3StateSpace() if self.robot.body == "sshape" else ob.RealVectorStateSpace(d)
         space.setBounds(bounds)
         return space
 
     def _reader(self) -> Any:
         """``state -> configuration`` (a float64 array)."""
-        if self.robot.name == "sshape":
+        if self.robot.body == "sshape":
 
             def read(s: Any) -> np.ndarray:
                 r = s.rotation()
@@ -173,7 +173,7 @@ class OMPLPlanner:
         return lambda s: np.array([s[i] for i in range(d)])
 
     def _write(self, s: Any, q: np.ndarray) -> None:
-        if self.robot.name == "sshape":
+        if self.robot.body == "sshape":
             s.setXYZ(float(q[0]), float(q[1]), float(q[2]))
             quat = np.asarray(q[3:7], np.float64)
             quat = quat / np.linalg.norm(quat)

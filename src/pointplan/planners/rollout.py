@@ -113,6 +113,7 @@ ESCAPE_DEFAULTS: dict[str, Escape] = {
     "sshape": Escape(steps=10, noise=2.0, still=0.01),
     "panda": Escape(steps=10, noise=2.0, still=0.01),
     "ur5": Escape(steps=10, noise=2.0, still=0.01),
+    "sshape-oriented": Escape(steps=10, noise=2.0, still=0.01),
     "sphere3d": Escape(steps=10, noise=0.0, still=0.1, window=6, subgoal=True),
 }
 ESCAPE_OFF = Escape(steps=0)

@@ -51,6 +51,12 @@ class Robot(ABC):
     #: body geometry
     parts: BodyParts
 
+    @property
+    def body(self) -> str:
+        """The body's name: robots with the same body and motion (an S-shape told its
+        orientation and the plain one) share demonstrations and classical planners."""
+        return self.name
+
     # -------------------------------------------------------------- group operations
     @abstractmethod
     def integrate(self, q: Array, v: Array) -> Array:

@@ -258,6 +258,26 @@ class SShape(Robot):
         return lie.matrix_to_quat(lie.random_rotations(rng, n))
 
 
+class OrientedSShape(SShape):
+    """The S-shape told its orientation, as an inertial sensor would: the same body, motion
+    and observations, and a policy is also given the world's three axes in the body frame
+    (the rows of the body-to-world rotation, 9 numbers) beside the goal vector. The
+    observations are in the body frame, so a plain S-shape policy cannot tell which way the
+    world's axes run where the scene looks the same in several orientations (Slot's square
+    wall: which way its opening runs). Not the paper's observation; a variant to measure
+    what that knowledge is worth. Demonstrations of ``sshape`` serve it unchanged (same
+    body, :attr:`~pointplan.robots.base.Robot.body`)."""
+
+    name = "sshape-oriented"
+    body = "sshape"
+    state_feature_dim = 9
+
+    def state_features(self, q: Array, goal: Array) -> Array:
+        """The world's x, y and z axes in the body frame, ``(..., 9)``."""
+        rot = self.rotations(q)
+        return rot.reshape(rot.shape[:-2] + (9,))
+
+
 class NumpySShape(SShape):
     """The S-shape with ``integrate`` and ``log`` through 4x4 matrices and the motion
     checks in numpy: the reference the compiled kernels are tested and benchmarked

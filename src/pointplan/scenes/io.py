@@ -61,7 +61,12 @@ FORMAT = "pointplan-scene"
 VERSION = 1
 
 #: robots a scene file may name: workspace dimension and configuration length
-ROBOT_DIMS: dict[str, tuple[int, int]] = {"disc2d": (2, 2), "sphere3d": (3, 3), "sshape": (3, 7)}
+ROBOT_DIMS: dict[str, tuple[int, int]] = {
+    "disc2d": (2, 2),
+    "sphere3d": (3, 3),
+    "sshape": (3, 7),
+    "sshape-oriented": (3, 7),
+}
 
 OBSTACLE_TYPES = ("box", "sphere", "capsule", "cylinder", "mesh", "points")
 _DEPTH_FIELDS = ("intrinsics", "camera_pose", "depth_scale", "stride")
