@@ -67,7 +67,7 @@ def main() -> None:
     from pointplan.viz.plot3d import render_grid_3d, render_rollout_gif
 
     policy = Policy.from_checkpoint(args.checkpoint)
-    sc = make_scenario(args.env, robot="sshape")
+    sc = make_scenario(args.env, robot=policy.robot.name)  # sshape, or sshape-oriented
     robot = sc.robot
     planner = PolicyPlanner(policy, robot=robot, attempts=1, escape=args.escape)
     expert = SlotThreading.load(robot)
