@@ -102,6 +102,9 @@ def test_the_oriented_sshape_takes_its_slot_policy_and_its_paths_are_certified()
     scenario = make_scenario("slot", robot="sshape-oriented")
     planner = make_planner("policy", scenario.robot, scene="slot")
     assert planner.policy.robot.name == "sshape-oriented" and planner.policy.n_points == 64
+    from pointplan.planners.rollout import ESCAPE_DEFAULTS
+
+    assert planner.escape == ESCAPE_DEFAULTS["sshape"]  # the same body, the same escape
     solved = 0
     for p in scenario.problems("val", 10, seed=0):
         res = planner.plan(p)

@@ -465,7 +465,7 @@ class PPORun:
         row["val_success"] = float(np.mean([r.success for r in res]))
         solved = [r.nodes for r in res if r.success]
         row["val_steps"] = float(np.mean(solved)) if solved else 0.0
-        escape = ESCAPE_DEFAULTS.get(robot.name)
+        escape = ESCAPE_DEFAULTS.get(robot.body)
         if self.cfg.eval_escape and escape is not None:
             res = rollout_batch(
                 act,

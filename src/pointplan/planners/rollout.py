@@ -113,7 +113,6 @@ ESCAPE_DEFAULTS: dict[str, Escape] = {
     "sshape": Escape(steps=10, noise=2.0, still=0.01),
     "panda": Escape(steps=10, noise=2.0, still=0.01),
     "ur5": Escape(steps=10, noise=2.0, still=0.01),
-    "sshape-oriented": Escape(steps=10, noise=2.0, still=0.01),
     "sphere3d": Escape(steps=10, noise=0.0, still=0.1, window=6, subgoal=True),
 }
 ESCAPE_OFF = Escape(steps=0)
@@ -600,7 +599,7 @@ class RolloutEngine:
         meta_horizon = self.policy.meta.get("horizon") if self.policy is not None else None
         self.horizon = int(self.options.horizon or meta_horizon or 50)
         self.env = replace(env, horizon=self.horizon)
-        self.escape = self.options.escape_for(robot.name)
+        self.escape = self.options.escape_for(robot.body)  # (sshape-oriented: the S-shape's)
         self.observer_wrapper = observer_wrapper
         self.action_dim = len(robot.action_scale)
         #: the network as numpy arrays (weights as of now), or None: PyTorch on one thread
