@@ -78,6 +78,7 @@ def demos(args: argparse.Namespace) -> None:
     from pointplan.evaluation.evaluate import check_path
     from pointplan.learning.bc import demos_from_paths, load_demos, resample_path, save_demos
     from pointplan.planners.slot_threading import SlotThreading
+    from pointplan.robots.sshape import BAR_THICKNESS
     from pointplan.scenes.scenarios import make_scenario
 
     sc = make_scenario(args.env, robot="sshape")
@@ -86,7 +87,7 @@ def demos(args: argparse.Namespace) -> None:
     out = Path(args.save_demos)
     paths: list[tuple[int, np.ndarray]] = list(load_demos(out, sc).paths) if out.exists() else []
     done = {k for k, _ in paths}
-    counts = {"solved": 0, "narrower than the template": 0, "failed": 0, "already": 0}
+    counts = {"solved": 0, "narrower than the template": 0, "wider than --max-bars": 0, "failed": 0, "already": 0}
     new = 0
     bar = tqdm(
         range(args.first, args.first + args.problems), desc="threading demos", unit="problem", disable=args.quiet
@@ -100,6 +101,9 @@ def demos(args: argparse.Namespace) -> None:
             p = sc.problem("train", index, seed=args.seed)
             if not expert.threads(p.scene.__dict__["slot"]):
                 counts["narrower than the template"] += 1
+                continue
+            if args.max_bars and p.scene.__dict__["slot"]["width"] / BAR_THICKNESS > args.max_bars:
+                counts["wider than --max-bars"] += 1
                 continue
             path = expert.plan(p, seed=index)
             ok = check_path(robot, p, path) if path is not None else None
@@ -205,6 +209,12 @@ def parser() -> argparse.ArgumentParser:
         help="the n of the demonstration indices (the same for every process filling one file)",
     )
     d.add_argument("--max-nodes", type=int, default=5000, help="Bi-RRT nodes where a straight edge collides")
+    d.add_argument(
+        "--max-bars",
+        type=float,
+        default=0.0,
+        help="only slots at most this many bars wide (0: every width; more thin-slot demonstrations)",
+    )
     d.add_argument("--save-every", type=int, default=100)
     d.add_argument(
         "--copies",

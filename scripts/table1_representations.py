@@ -137,10 +137,26 @@ def run_bc(cell: str, args: argparse.Namespace) -> dict:
             print(f"{cell} bc: resuming after {state['done']} epochs ({state_file})", file=sys.stderr)
     t0 = time.perf_counter() - before
     for done in range(start, args.bc_epochs + 1, args.bc_eval_every):
-        fit_actor(
-            actor, opt, demos, robot, env, args.bc_eval_every, cfg.batch_size, rng, cfg.refresh_every, progress=False
-        )
-        success = validate(actor, robot, env, val, scenario.horizon)
+        try:
+            fit_actor(
+                actor,
+                opt,
+                demos,
+                robot,
+                env,
+                args.bc_eval_every,
+                cfg.batch_size,
+                rng,
+                cfg.refresh_every,
+                progress=False,
+            )
+            success = validate(actor, robot, env, val, scenario.horizon)
+        except KeyboardInterrupt:  # Ctrl-C: the state of the last validation is what is kept
+            kept = curve[-1]["epochs"] if curve else 0
+            print(
+                f"{cell} bc: interrupted; {state_file} keeps {kept} epochs, the same command continues", file=sys.stderr
+            )
+            return {"curve": curve, "interrupted": True}
         curve.append({"epochs": done, "val_success": success, "wall_time_s": time.perf_counter() - t0})
         print(f"{cell} bc: {done} epochs, val {success:.3f}", file=sys.stderr, flush=True)
         payload = policy_payload(cfg, robot.name, shape, actor, scenario.horizon)
@@ -338,6 +354,9 @@ def main() -> int:
                 "wall_time_s": time.perf_counter() - t0,
             }
             (out / f"{cell.replace(':', '_')}_{args.method}.json").write_text(json.dumps(record, indent=1))
+            if result.get("interrupted"):
+                print(f"{cell} {args.method}: interrupted", file=sys.stderr)
+                break
             test = result.get("test")
             print(
                 f"{cell} {args.method}: test success {test['success_rate']:.3f}"
