@@ -145,6 +145,14 @@ def test_ppo_command_runs_saves_and_resumes(tmp_path: Path) -> None:
     assert main(["ppo", "--resume", str(run_dir / "last.pt"), "--steps", "100", *common]) == 2
     assert main(["ppo", "--steps", "100", *common]) == 2
     assert main(["ppo", "--resume", str(run_dir / "best.pt"), "--steps", "400", *common]) == 2
+    # resumed with the same validation the best so far stands; with another one it starts afresh
+    from pointplan.config import from_dict
+
+    state = load_checkpoint(run_dir / "last.pt")
+    same = from_dict(PPOConfig, state["ppo_config"])
+    assert PPORun(same, tmp_path / "again", run_dir / "last.pt").best == state["ppo"]["best"] >= 0
+    other = from_dict(PPOConfig, {**state["ppo_config"], "eval_episodes": 2})
+    assert PPORun(other, tmp_path / "other", run_dir / "last.pt").best == -1.0
 
 
 @pytest.fixture(scope="module")

@@ -221,6 +221,9 @@ class PPORun:
         self.recent: list[float] = []
         if resume is not None:
             self._restore(resume, init)
+            before = init.get("ppo_config", {})
+            if (before.get("eval_episodes"), before.get("select")) != (cfg.eval_episodes, cfg.select):
+                self.best = -1.0  # another validation: the best so far is not comparable, best.pt starts afresh
         for g in self.opt_actor.param_groups:  # a resumed run takes the step sizes given now
             g["lr"] = cfg.lr
         for g in self.opt_value.param_groups:
