@@ -212,6 +212,23 @@ def test_reverse_curriculum_starts_on_the_demonstrations_near_their_goal(demos_f
     assert not run2.from_demo.any()
 
 
+def test_reverse_curriculum_takes_several_paths_per_problem(demos_file: Path, tmp_path: Path) -> None:
+    """A roadmap expert's file holds several paths of one problem: each keeps its own problem."""
+    from pointplan.learning.bc import demos_from_paths, load_demos, save_demos
+    from pointplan.scenes.scenarios import make_scenario
+
+    scenario = make_scenario("narrow2d")
+    one = load_demos(demos_file, scenario)
+    twice = [(k, path) for k, path in one.paths for path in (path, path[1:])]  # a second, shorter path of each
+    path = tmp_path / "twice.npz"
+    save_demos(path, scenario, demos_from_paths(scenario, "train", 0, twice), "train", 0)
+    cfg = PPOConfig(init_actor=str(shipped_checkpoint("disc2d")), num_envs=2, eval_episodes=2, start_demos=str(path))
+    run = PPORun(cfg, tmp_path / "run", None)
+    assert len(run.demo_paths) == len(twice) == 2 * len(one.problems)
+    for prob, demo in run.demo_paths:
+        assert np.allclose(demo[-1], prob.goal, atol=1e-6)  # every path ends at its own problem's goal
+
+
 def test_ppo_command_keeps_the_curriculum_across_a_resume(demos_file: Path, tmp_path: Path) -> None:
     from pointplan.cli import main
 

@@ -244,7 +244,8 @@ class PPORun:
             demos = load_demos(cfg.start_demos, self.scenario)
             by_index: dict[int, Problem] = {}
             for k, _ in demos.paths:  # the problems are listed in the order their indices first appear
-                by_index.setdefault(k, demos.problems[len(by_index)])
+                if k not in by_index:  # (a problem may have several paths: a roadmap expert's)
+                    by_index[k] = demos.problems[len(by_index)]
             self.demo_paths = [(by_index[k], path) for k, path in demos.paths if len(path) >= 2]
             if not self.demo_paths:
                 raise ValueError(f"{cfg.start_demos}: no demonstration path to start on")
