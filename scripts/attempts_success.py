@@ -42,6 +42,12 @@ def main() -> None:
         default=None,
         help="sampled steps after a stall (default: the planner's for the robot; 0: off)",
     )
+    ap.add_argument(
+        "--escape-tries",
+        type=int,
+        default=1,
+        help="draws per escape step, the furthest free motion taken (default: 1, the plain escape)",
+    )
     ap.add_argument("--json", help="write the rows here")
     args = ap.parse_args()
     if any(k < 1 for k in args.attempts):
@@ -56,11 +62,17 @@ def main() -> None:
     policy = Policy.from_checkpoint(ckpt)
     scenario = make_scenario(args.env or policy.env, robot=policy.robot.name)
     problems = scenario.problems(args.split, args.episodes, seed=args.seed)
+    escape: object = args.escape
+    if args.escape_tries != 1:
+        from dataclasses import replace
+
+        from pointplan.planners.rollout import RolloutOptions
+
+        base = RolloutOptions(escape=args.escape).escape_for(scenario.robot.body)
+        escape = replace(base, tries=args.escape_tries)
     rows = []
     for k in args.attempts:
-        planner = PolicyPlanner(
-            policy, robot=scenario.robot, attempts=k, action_noise=args.action_noise, escape=args.escape
-        )
+        planner = PolicyPlanner(policy, robot=scenario.robot, attempts=k, action_noise=args.action_noise, escape=escape)
         rep = evaluate(planner, problems, scenario.robot, progress=False)
         m = rep.metrics()
         row = {
@@ -96,6 +108,7 @@ def main() -> None:
                 {
                     "checkpoint": ckpt,
                     "escape": args.escape,
+                    "escape_tries": args.escape_tries,
                     "split": args.split,
                     "episodes": args.episodes,
                     "action_noise": args.action_noise,

@@ -22,10 +22,12 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 from pathlib import Path
 
 from pointplan.evaluation import evaluate
 from pointplan.planners import make_planner
+from pointplan.planners.rollout import RolloutOptions
 from pointplan.scenes.scenarios import make_scenario
 
 #: the paper's success (%): Table 3 (trained on 3D-Boxes) and Table 4 (3D-Qureshi)
@@ -77,6 +79,9 @@ def run(args: argparse.Namespace) -> None:
                     continue
                 if args.attempts > 1 and scenario.scene("test", 0).dynamic:
                     continue
+                esc = RolloutOptions(escape=args.escape).escape_for(scenario.robot.body)
+                if args.escape_tries is not None:
+                    esc = replace(esc, tries=args.escape_tries)
                 planner = make_planner(
                     "policy",
                     scenario.robot,
@@ -84,11 +89,12 @@ def run(args: argparse.Namespace) -> None:
                     observation=obs,
                     scene=scene,
                     attempts=args.attempts,
-                    escape=args.escape,
+                    escape=esc,
                 )
                 if args.escape > 0:
-                    kind = "sub" if planner.escape.subgoal else "esc"  # type: ignore[attr-defined]
-                    planner_name = f"{planner_name}-{kind}{args.escape}"
+                    kind = "sub" if esc.subgoal else "esc"
+                    tries = f"t{esc.tries}" if esc.tries > 1 else ""
+                    planner_name = f"{planner_name}-{kind}{args.escape}{tries}"
                 if args.attempts > 1:
                     planner_name = f"{planner_name}-x{args.attempts}"
             else:
@@ -159,6 +165,12 @@ def main() -> None:
         type=int,
         default=0,
         help="policy planners: where the robot is stuck, this many steps of the robot's escape (cells named policy-OBS-escK, or -subK where it heads for a subgoal; default: 0, the mean action throughout)",
+    )
+    ap.add_argument(
+        "--escape-tries",
+        type=int,
+        default=None,
+        help="policy planners: draws per escape step, the furthest free motion taken (default: the robot's; cells named -escKtN where N > 1)",
     )
     ap.add_argument("--table-only", action="store_true")
     ap.add_argument("--quiet", action="store_true")

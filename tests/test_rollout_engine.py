@@ -85,3 +85,46 @@ def test_stall_ends_a_rollout_in_every_stepper() -> None:
     probs = [p for p in sc.problems("val", 20, seed=0) if np.linalg.norm(p.goal - p.start) > 0.2][:3]
     for res in RolloutEngine(still, sc.robot, PolicyPlanner(policy).env, opts).run(probs):
         assert res.info["end"] == "stalled" and res.nodes == 5 and not res.success
+
+
+def test_screened_escape_takes_the_furthest_free_draw() -> None:
+    """With ``tries`` draws an escape step takes the action whose free motion goes
+    furthest: recomputed here from the same draws, each motion walked by ``q_free``; the
+    rollouts that use it still pass the evaluator's path check."""
+    from dataclasses import replace
+
+    from pointplan.envs.core import q_free
+    from pointplan.evaluation.evaluate import check_path
+    from pointplan.planners.rollout import _OneRobot
+
+    for bad in (0, -1, 2.5):
+        with pytest.raises(ValueError, match="tries"):
+            Escape(tries=bad)  # type: ignore[arg-type]
+    sc = make_scenario("boxes3d", robot="sshape")
+    esc = replace(ESCAPE_DEFAULTS["sshape"], tries=6)
+    planner = PolicyPlanner(shipped_checkpoint("sshape", "local"), escape=esc)
+    eng = planner.engine
+    p = sc.problem("val", 0, seed=0)
+    sp = _OneRobot(eng, p, np.random.default_rng(7), sampled=False)
+    q = np.asarray(p.start, np.float64)
+    obs = eng.observer.observe_one(q, u=eng._uniforms(10_000)[: eng.observer.draws_one()])
+    chosen = sp._furthest(obs, q, np.asarray(p.goal, np.float64))
+    again = np.random.default_rng(7)
+    dist, acts = [], []
+    for _ in range(6):
+        a = eng._act(obs, q, np.asarray(p.goal, np.float64), esc.noise * again.standard_normal(eng.action_dim))
+        tw = np.clip(np.asarray(a, np.float64), -1, 1) * np.asarray(sc.robot.action_scale)
+        q1, _, _ = q_free(
+            sc.robot, p.scene.world, q[None], tw[None], p.scene.low[None], p.scene.high[None], eng.env.substep
+        )
+        dist.append(float(np.asarray(sc.robot.distance(q1, q[None]))[0]))
+        acts.append(a)
+    assert np.allclose(chosen, acts[int(np.argmax(dist))])
+    assert sp.pending_checks > 0  # the draws' motion checks wait to be counted with the step
+    escaped = 0
+    for prob in sc.problems("val", 40, seed=0):
+        res = planner.plan(prob)
+        escaped += res.info.get("escapes", 0) > 0
+        if res.success:
+            assert check_path(sc.robot, prob, res.path)
+    assert escaped > 0  # the compiled rollout handed the escapes to the step loop

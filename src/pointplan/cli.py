@@ -251,6 +251,8 @@ def _check_checkpoint(args: argparse.Namespace, names: Sequence[str]) -> None:
         raise CLIError(f"--attempts is for --planner policy or hybrid, not {', '.join(names)}")
     if getattr(args, "escape", None) is not None and not any(n.lower() in POLICY_PLANNERS for n in names):
         raise CLIError(f"--escape is for --planner policy or hybrid, not {', '.join(names)}")
+    if getattr(args, "escape_tries", None) is not None and not any(n.lower() in POLICY_PLANNERS for n in names):
+        raise CLIError(f"--escape-tries is for --planner policy or hybrid, not {', '.join(names)}")
     noise = getattr(args, "action_noise", 1.0)
     if not (math.isfinite(noise) and noise >= 0):
         raise CLIError(f"--action-noise must be a finite number >= 0, not {noise}")
@@ -325,6 +327,13 @@ def _planner(name: str, robot: Robot, args: argparse.Namespace, seed: int) -> Pl
             kwargs.update(attempts=args.attempts, action_noise=args.action_noise)
         if getattr(args, "escape", None) is not None:
             kwargs["escape"] = args.escape
+        if getattr(args, "escape_tries", None) is not None:
+            from dataclasses import replace
+
+            from .planners.rollout import RolloutOptions
+
+            base = RolloutOptions(escape=getattr(args, "escape", None)).escape_for(robot.body)
+            kwargs["escape"] = replace(base, tries=args.escape_tries)
         if name == "hybrid":
             kwargs.update(max_nodes=given_nodes, seed=seed)
         if name in ("hybrid", "hybrid-ompl") and time_limit is not None:
@@ -408,6 +417,11 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
         "--escape",
         type=non_negative_int,
         help="--planner policy or hybrid: where the robot is stuck, this many steps of the robot's escape, then the mean action toward the goal again; 0 turns it off (default: 10 for the S-shape, which samples from twice the policy's spread after a step that did not move it, and for the sphere, which heads for a random subgoal after 6 steps that ended within 0.1 of where they started; both chosen on validation; 0 for the disc)",
+    )
+    p.add_argument(
+        "--escape-tries",
+        type=positive_int,
+        help="--planner policy or hybrid: each sampled step of an escape draws this many actions and takes the one whose free motion goes furthest (static scenes; default: the robot's, 8 for the S-shape, chosen on validation; 1 is the plain escape)",
     )
     p.add_argument(
         "--seed", type=non_negative_int, default=0, help="problem-set seed, 0 or more (default: %(default)s)"
