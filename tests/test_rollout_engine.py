@@ -128,3 +128,34 @@ def test_screened_escape_takes_the_furthest_free_draw() -> None:
         if res.success:
             assert check_path(sc.robot, prob, res.path)
     assert escaped > 0  # the compiled rollout handed the escapes to the step loop
+
+
+def test_screened_escape_in_lockstep_among_moving_obstacles() -> None:
+    """The batched stepper screens the escaping robots' draws too (against the obstacles
+    where they will be after the step): an escaping robot moves at least as far as its
+    first draw would take it, the others keep their first draw; plans stay certified."""
+    from dataclasses import replace
+
+    from pointplan.evaluation.evaluate import check_path
+    from pointplan.planners.rollout import _Lockstep
+
+    sc = make_scenario("dynamic3d", robot="sshape")
+    esc = replace(ESCAPE_DEFAULTS["sshape"], tries=6)
+    planner = PolicyPlanner(shipped_checkpoint("sshape", "local"), escape=esc)
+    eng = planner.engine
+    probs = sc.problems("val", 4, seed=0)
+    sp = _Lockstep(eng.act, sc.robot, eng.env, probs, np.random.default_rng(0), np.random.default_rng(1), 0.0, esc)
+    obs = sp.core.observe(np.random.default_rng(2))["observation"]
+    target = sp.core.goal.copy()
+    first = np.asarray(eng.act(obs, sp.core.q.copy(), target.copy(), noise=esc.noise * np.ones((4, 6))), np.float32)
+    escaping = np.array([True, False, True, False])
+    q0 = sp.core.q.copy()
+    before = np.asarray(sc.robot.distance(sp._free_move(first)[0], q0))
+    chosen = sp._furthest(obs, target, escaping, first.copy())
+    after = np.asarray(sc.robot.distance(sp._free_move(chosen)[0], q0))
+    assert np.all(after[escaping] >= before[escaping] - 1e-12)
+    np.testing.assert_array_equal(chosen[~escaping], first[~escaping])
+    assert np.all(sp.pending_checks[escaping] > 0) and np.all(sp.pending_checks[~escaping] == 0)
+    for p in probs:
+        res = planner.plan(p)
+        assert bool(check_path(sc.robot, p, res.path)) == res.success

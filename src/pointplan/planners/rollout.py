@@ -80,9 +80,8 @@ class Escape:
     a local minimum, as in potential-field planners).
 
     ``tries``: each sampled step of an escape draws this many actions and takes the one
-    whose free motion goes furthest (each draw's motion checked, and counted). It applies
-    to one robot in a static scene (the planner's rollout); among moving obstacles, and in
-    the lockstep batches of training's validation, an escape step draws one action."""
+    whose free motion goes furthest (each draw's motion checked against the obstacles
+    where they will be after the step, and counted). One draw is the plain escape."""
 
     steps: int = 10
     noise: float = 2.0
@@ -442,6 +441,7 @@ class _Lockstep(_Stepper):
         self.core = BatchedCore(_GivenProblems(robot, int(env.horizon or 0)), len(problems), env)
         self.core.reset_envs(range(len(problems)), rng, problems)
         self.rng, self.nrng, self.noise, self.esc = rng, nrng, noise, esc
+        self.pending_checks: Any = 0  # motion checks of the screened escape's draws, counted with the step
         self.sampled = esc.on or noise > 0
         self._testers: dict[int, GoalTester] = {}
 
@@ -452,11 +452,49 @@ class _Lockstep(_Stepper):
             return np.asarray(self.act(obs, core.q.copy(), core.goal.copy()), np.float32)
         scale = np.where(escaping, self.esc.noise, self.noise)
         draw = self.nrng.standard_normal((len(self.problems), len(self.robot.action_scale)))
-        return np.asarray(self.act(obs, core.q.copy(), target.copy(), noise=scale[:, None] * draw), np.float32)
+        a = np.asarray(self.act(obs, core.q.copy(), target.copy(), noise=scale[:, None] * draw), np.float32)
+        if self.esc.tries > 1 and escaping.any():
+            a = self._furthest(obs, target, escaping, a)
+        return a
+
+    def _free_move(self, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where actions ``a`` take the robots, as far as each is free (against the
+        obstacles where they will be after the step); the motion checks of each."""
+        core = self.core
+        tw = np.clip(a.astype(np.float64), -1.0, 1.0) * self.robot.action_scale
+        q1, _, n = q_free(
+            self.robot,
+            core.world_at(core.t + 1),
+            core.q,
+            tw,
+            core.low,
+            core.high,
+            core.config.substep,
+            clip_target=core.config.bounds == "clip",
+        )
+        return q1, np.asarray(n)
+
+    def _furthest(self, obs: np.ndarray, target: np.ndarray, escaping: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """The screened escape for the robots ``escaping``: of ``tries`` draws (``a`` the
+        first), each takes the one whose free motion goes furthest."""
+        q0 = self.core.q.copy()
+        q1, n = self._free_move(a)
+        far = np.asarray(self.robot.distance(q1, q0))
+        self.pending_checks = np.where(escaping, n, 0)
+        for _ in range(self.esc.tries - 1):
+            draw = self.esc.noise * self.nrng.standard_normal(a.shape)
+            b = np.asarray(self.act(obs, q0.copy(), target.copy(), noise=draw), np.float32)
+            q1, n = self._free_move(b)
+            d = np.asarray(self.robot.distance(q1, q0))
+            better = escaping & (d > far)
+            a[better], far[better] = b[better], d[better]
+            self.pending_checks = self.pending_checks + np.where(escaping, n, 0)
+        return a
 
     def move(self, a: np.ndarray, st: _State) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         _, term, _, info = self.core.step(a)
-        return self.core.q.copy(), term, info["crushed"], info["collision_checks"]
+        checks, self.pending_checks = info["collision_checks"] + self.pending_checks, 0
+        return self.core.q.copy(), term, info["crushed"], checks
 
     def goal_free(self, i: int, q: np.ndarray) -> tuple[bool, int]:
         if i not in self._testers:
