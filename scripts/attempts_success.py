@@ -45,8 +45,8 @@ def main() -> None:
     ap.add_argument(
         "--escape-tries",
         type=int,
-        default=1,
-        help="draws per escape step, the furthest free motion taken (default: 1, the plain escape)",
+        default=None,
+        help="draws per escape step, the furthest free motion taken (default: the robot's; 1: the plain escape)",
     )
     ap.add_argument("--json", help="write the rows here")
     args = ap.parse_args()
@@ -63,7 +63,7 @@ def main() -> None:
     scenario = make_scenario(args.env or policy.env, robot=policy.robot.name)
     problems = scenario.problems(args.split, args.episodes, seed=args.seed)
     escape: object = args.escape
-    if args.escape_tries != 1:
+    if args.escape_tries is not None:
         from dataclasses import replace
 
         from pointplan.planners.rollout import RolloutOptions
