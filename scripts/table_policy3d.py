@@ -115,11 +115,14 @@ def table(robot: str) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
 
-    def order(name: str) -> tuple[str, int, int]:  # policy-OBS[-escK|-subK][-xK]: by observation, escape, attempts
+    def order(
+        name: str,
+    ) -> tuple[str, int, int, int]:  # policy-OBS[-escK[tN]|-subK][-xK]: observation, escape, tries, attempts
         parts = name.split("-")[2:]
-        esc = next((int(p[3:]) for p in parts if p.startswith(("esc", "sub"))), 0)
+        kind = next((p[3:] for p in parts if p.startswith(("esc", "sub"))), "0")
+        esc, _, tries = kind.partition("t")
         att = next((int(p[1:]) for p in parts if p.startswith("x")), 1)
-        return name.split("-")[1], esc, att
+        return name.split("-")[1], int(esc), int(tries or 1), att
 
     base = ("policy-global", "policy-local")
     tried = sorted({p.stem.split("_", 2)[2] for p in OUT.glob(f"{robot}_*_policy-*.json")} - set(base), key=order)
