@@ -127,7 +127,7 @@ def test_screened_escape_takes_the_furthest_free_draw() -> None:
         escaped += res.info.get("escapes", 0) > 0
         if res.success:
             assert check_path(sc.robot, prob, res.path)
-    assert escaped > 0  # the compiled rollout handed the escapes to the step loop
+    assert escaped > 0
 
 
 def test_screened_escape_in_lockstep_among_moving_obstacles() -> None:

@@ -89,7 +89,8 @@ END_AT_GOAL = 7
     I_ROBOT,
     I_HANDOVER,
     I_OBS,
-) = range(13)
+    I_TRIES,
+) = range(14)
 #: ``I_ROBOT``: a translating ball, or a free-flying body of boxes
 BALL, BODY = 0, 1
 #: ``I_OBS``: what the robot sees: rays (``local``), or a subset of the scene's points (``global``)
@@ -417,6 +418,38 @@ def _finish(kind, end, path, t, goal, greedy, connect, resolution, low, high, ra
 
 
 @_jit
+def _furthest(  # type: ignore[no-untyped-def]
+    q, goal, u, noise, normals, drawn, sd, rays, rboxes, pts, nrm, low, high, boxes, body, fparams, iparams, scale,
+    wflat, layout, ows, nws, ws, tw, cand, tmp, best,
+):  # fmt: skip
+    """The screened escape's step: ``I_TRIES`` actions drawn from ``normals`` (from row
+    ``drawn``, scaled by ``sd``), each moved from ``q`` into ``cand`` as far as it is
+    free; the one that went furthest is left in ``best`` (the first of equals). Returns the
+    motion checks of all the draws and the next row of ``normals``."""
+    kind, adim, radius = iparams[I_ROBOT], iparams[I_ACTION_DIM], fparams[F_RADIUS]
+    far, checks = -1.0, 0
+    for _ in range(iparams[I_TRIES]):
+        for i in range(adim):
+            noise[i] = np.float32(sd * normals[drawn, i])
+        drawn += 1
+        a = _act(
+            q, goal, u, noise, True, rays, rboxes, pts, nrm, low, high, fparams, iparams, scale, wflat, layout, ows, nws
+        )
+        for i in range(adim):
+            tw[i] = np.float64(min(max(a[i], np.float32(-1.0)), np.float32(1.0))) * scale[i]
+        _, c = _r_move(
+            kind, q, tw, fparams[F_SUBSTEP], iparams[I_CLIP] != 0, low, high, radius, body, boxes, ws, cand, scale
+        )
+        checks += c
+        d = _r_distance(kind, cand, q, tmp)
+        if d > far:
+            far = d
+            for i in range(adim):
+                best[i] = a[i]
+    return checks, drawn
+
+
+@_jit
 def rollout_rigid(  # type: ignore[no-untyped-def]
     q0,
     goal,
@@ -470,6 +503,7 @@ def rollout_rigid(  # type: ignore[no-untyped-def]
     ows = (o4[0], o4[1], o4[2], o4[3], np.empty((n_points, 6), np.float32), np.empty(n_points, np.int64))
     nws = _workspace(n_points, layout, adim)
     noise = np.zeros(adim, np.float32)
+    best = np.empty(adim, np.float32)  # the step's action
     tw = np.empty(adim)
     tmp = np.empty(6)
     for i in range(q0.shape[0]):
@@ -486,32 +520,25 @@ def rollout_rigid(  # type: ignore[no-untyped-def]
                 break
         escaping = left > 0
         noisy = escaping or sampled
-        if noisy:
-            sd = fparams[F_ESC_NOISE] if escaping else fparams[F_NOISE]
-            for i in range(adim):
-                noise[i] = np.float32(sd * normals[drawn, i])
-            drawn += 1
         u = stream[t * blk : (t + 1) * blk]
-        a = _act(
-            q,
-            goal,
-            u,
-            noise,
-            noisy,
-            rays,
-            rboxes,
-            pts,
-            nrm,
-            low,
-            high,
-            fparams,
-            iparams,
-            scale,
-            wflat,
-            layout,
-            ows,
-            nws,
-        )
+        if escaping and iparams[I_TRIES] > 1:
+            c, drawn = _furthest(
+                q, goal, u, noise, normals, drawn, fparams[F_ESC_NOISE], rays, rboxes, pts, nrm, low, high, boxes, body,
+                fparams, iparams, scale, wflat, layout, ows, nws, ws, tw, path[t + 1], tmp, best,
+            )  # fmt: skip
+            checks += c
+        else:
+            if noisy:
+                sd = fparams[F_ESC_NOISE] if escaping else fparams[F_NOISE]
+                for i in range(adim):
+                    noise[i] = np.float32(sd * normals[drawn, i])
+                drawn += 1
+            res = _act(
+                q, goal, u, noise, noisy, rays, rboxes, pts, nrm, low, high, fparams, iparams, scale, wflat, layout, ows, nws
+            )  # fmt: skip
+            for i in range(adim):
+                best[i] = res[i]
+        a = best
         if escaping:
             left -= 1
         for i in range(adim):

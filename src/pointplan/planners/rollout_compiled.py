@@ -332,7 +332,7 @@ class CompiledRays:
             observer.spacing,
             float(getattr(eng.robot, "radius", 0.0)),
         )
-        iparams = np.zeros(13, np.int64)
+        iparams = np.zeros(14, np.int64)
         iparams[:] = (
             eng.horizon,
             int(opts.stall_steps or 0),
@@ -345,8 +345,9 @@ class CompiledRays:
             esc.steps if esc.on else 0,
             int(sampled),
             self.kind,
-            int(esc.on and (esc.subgoal or esc.tries > 1)),  # a subgoal's or a screened escape: the step loop's
+            int(esc.on and esc.subgoal),  # an escape toward a subgoal: the step loop's
             self.sees,
+            esc.tries,
         )
         return fparams, iparams
 
@@ -359,8 +360,7 @@ class CompiledRays:
         starts (the step loop goes on from there); ``(None, None, None)`` where it does
         not apply (a scene not of boxes only; a sampled attempt with subgoal escapes)."""
         esc = self.engine.escape
-        handed = esc.on and (esc.subgoal or esc.tries > 1)  # escapes the step loop takes
-        if sampled and handed:
+        if sampled and esc.on and esc.subgoal:
             return None, None, None
         scene = problem.scene
         if scene is not self._scene:
@@ -372,8 +372,9 @@ class CompiledRays:
         eng = self.engine
         horizon, adim = eng.horizon, eng.robot.twist_dim
         # the sampled steps' normal draws, in the order the step loop takes them
-        noisy = sampled or (esc.on and not handed)
-        normals = nrng.standard_normal((horizon, adim)) if noisy else np.zeros((0, adim))
+        noisy = sampled or (esc.on and not esc.subgoal)
+        # (a screened escape takes ``tries`` rows a step)
+        normals = nrng.standard_normal((horizon * max(1, esc.tries), adim)) if noisy else np.zeros((0, adim))
         fparams, iparams = self._params(sampled)
         start, goal = (np.ascontiguousarray(x, np.float64) for x in (problem.start, problem.goal))
         path = np.empty((horizon + 2, eng.robot.config_dim))
