@@ -1,10 +1,10 @@
 """Escapes through the planner itself: success of ``PolicyPlanner`` with each escape on
 validation problems (docs/results/3d-sphere.md, "How the escape was chosen"). Each ``--configs`` entry is
-``STEPS:NOISE:STILL:WINDOW[:subgoal]`` (``0`` alone: no escape), for example the sphere's
-default and the S-shape's:
+``STEPS:NOISE:STILL:WINDOW[:subgoal][:tN]`` (``0`` alone: no escape; ``tN``: N draws per
+escape step, the furthest-moving taken), for example the sphere's default and the S-shape's:
 
     python experiments/escape_sweep.py --robot sphere3d --observation local --episodes 500 --configs 0 10:0:0.1:6:subgoal
-    python experiments/escape_sweep.py --robot sshape --observation global --configs 10:2:0.01:1 10:0:0.01:1:subgoal
+    python experiments/escape_sweep.py --robot sshape --observation global --configs 10:2:0.01:1:t8 10:0:0.01:1:subgoal
 
 ``--val-seed 1`` draws another 500 validation problems, to confirm a choice made on the
 first draw. Every path is re-checked by the evaluator (``claims disagree``).
@@ -23,10 +23,13 @@ def parse_config(text: str):  # type: ignore[no-untyped-def]
     if text == "0":
         return Escape(steps=0)
     parts = text.split(":")
+    tries = 1
+    if parts[-1].startswith("t") and parts[-1][1:].isdigit():  # draws per escape step, the furthest taken
+        tries = int(parts.pop()[1:])
     if len(parts) not in (4, 5) or (len(parts) == 5 and parts[4] != "subgoal"):
-        raise argparse.ArgumentTypeError(f"an escape is STEPS:NOISE:STILL:WINDOW[:subgoal] or 0, not {text!r}")
+        raise argparse.ArgumentTypeError(f"an escape is STEPS:NOISE:STILL:WINDOW[:subgoal][:tN] or 0, not {text!r}")
     try:
-        return Escape(steps=int(parts[0]), noise=float(parts[1]), still=float(parts[2]), window=int(parts[3]), subgoal=len(parts) == 5)
+        return Escape(steps=int(parts[0]), noise=float(parts[1]), still=float(parts[2]), window=int(parts[3]), subgoal=len(parts) == 5, tries=tries)
     except ValueError as e:
         raise argparse.ArgumentTypeError(str(e)) from e
 
@@ -60,7 +63,7 @@ def main() -> None:
         t0 = time.perf_counter()
         m = evaluate(planner, problems, scenario.robot, progress=False).metrics()
         row = {
-            "escape": {"steps": esc.steps, "noise": esc.noise, "still": esc.still, "window": esc.window, "subgoal": esc.subgoal},
+            "escape": {"steps": esc.steps, "noise": esc.noise, "still": esc.still, "window": esc.window, "subgoal": esc.subgoal, "tries": esc.tries},
             "success": m["success_rate"],
             "mean_steps": m["nodes_mean"],
             "claims_disagree": m["planner_claims_disagree"],
