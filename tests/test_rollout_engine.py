@@ -132,7 +132,7 @@ def test_screened_escape_takes_the_furthest_free_draw() -> None:
 
 def test_screened_escape_in_lockstep_among_moving_obstacles() -> None:
     """The batched stepper screens the escaping robots' draws too (against the obstacles
-    where they will be after the step): an escaping robot moves at least as far as its
+    as they are at the step's start): an escaping robot moves at least as far as its
     first draw would take it, the others keep their first draw; plans stay certified."""
     from dataclasses import replace
 

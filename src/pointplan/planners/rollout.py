@@ -80,8 +80,9 @@ class Escape:
     a local minimum, as in potential-field planners).
 
     ``tries``: each sampled step of an escape draws this many actions and takes the one
-    whose free motion goes furthest (each draw's motion checked against the obstacles
-    where they will be after the step, and counted). One draw is the plain escape."""
+    whose free motion goes furthest (each draw's motion checked, and counted; among moving
+    obstacles, against where they are at the step's start, not where they will be). One
+    draw is the plain escape."""
 
     steps: int = 10
     noise: float = 2.0
@@ -458,13 +459,14 @@ class _Lockstep(_Stepper):
         return a
 
     def _free_move(self, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Where actions ``a`` take the robots, as far as each is free (against the
-        obstacles where they will be after the step); the motion checks of each."""
+        """Where actions ``a`` would take the robots, as far as each is free among the
+        obstacles as they are now (what the robot's sensors show: no look at where
+        moving ones will be); the motion checks of each."""
         core = self.core
         tw = np.clip(a.astype(np.float64), -1.0, 1.0) * self.robot.action_scale
         q1, _, n = q_free(
             self.robot,
-            core.world_at(core.t + 1),
+            core.world_at(core.t),
             core.q,
             tw,
             core.low,
