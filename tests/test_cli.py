@@ -512,6 +512,14 @@ def test_eval_escape_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert "--escape" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["eval", "--planner", "policy", "--episodes", "2", "--escape", "-1", "--quiet"])
+    # --escape-tries reaches the escape: one draw a step is the plain escape, a different rollout
+    out = tmp_path / "tries1.json"
+    assert main([*args, "--escape", "10", "--escape-tries", "1", "--json", str(out), "--quiet"]) == 0
+    assert json.loads(out.read_text())["collision_checks_mean"] != runs[10]["collision_checks_mean"]
+    assert main(["eval", "--planner", "birrt", "--episodes", "2", "--escape-tries", "3", "--quiet"]) == 2
+    assert "--escape-tries" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["eval", "--planner", "policy", "--episodes", "2", "--escape-tries", "0", "--quiet"])
 
 
 def test_eval_attempts_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
