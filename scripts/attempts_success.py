@@ -64,12 +64,9 @@ def main() -> None:
     problems = scenario.problems(args.split, args.episodes, seed=args.seed)
     escape: object = args.escape
     if args.escape_tries is not None:
-        from dataclasses import replace
-
         from pointplan.planners.rollout import RolloutOptions
 
-        base = RolloutOptions(escape=args.escape).escape_for(scenario.robot.body)
-        escape = replace(base, tries=args.escape_tries)
+        escape = RolloutOptions(escape=args.escape).escape_for(scenario.robot.body, args.escape_tries)
     rows = []
     for k in args.attempts:
         planner = PolicyPlanner(policy, robot=scenario.robot, attempts=k, action_noise=args.action_noise, escape=escape)

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import replace
 from pathlib import Path
 
 from pointplan.evaluation import evaluate
@@ -79,9 +78,7 @@ def run(args: argparse.Namespace) -> None:
                     continue
                 if args.attempts > 1 and scenario.scene("test", 0).dynamic:
                     continue
-                esc = RolloutOptions(escape=args.escape).escape_for(scenario.robot.body)
-                if args.escape_tries is not None:
-                    esc = replace(esc, tries=args.escape_tries)
+                esc = RolloutOptions(escape=args.escape).escape_for(scenario.robot.body, args.escape_tries)
                 planner = make_planner(
                     "policy",
                     scenario.robot,

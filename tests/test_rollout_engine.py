@@ -70,6 +70,7 @@ def test_options_are_validated_once() -> None:
     assert opts.escape_for("sphere3d") == Escape(4, 0.0, 0.1, 6, True)  # the robot's kind, 4 steps
     assert RolloutOptions().escape_for("sshape") == ESCAPE_DEFAULTS["sshape"]
     assert RolloutOptions().escape_for("disc2d").steps == 0
+    assert RolloutOptions(escape=4).escape_for("sshape", 1) == Escape(4, 2.0, 0.01, tries=1)  # fewer draws asked for
 
 
 def test_stall_ends_a_rollout_in_every_stepper() -> None:

@@ -179,13 +179,16 @@ class RolloutOptions:
         if int(self.chunk) < 1:
             raise ValueError(f"chunk must be >= 1, not {self.chunk}")
 
-    def escape_for(self, robot: str) -> Escape:
-        """The escape this rollout uses for robot ``robot``."""
+    def escape_for(self, robot: str, tries: int | None = None) -> Escape:
+        """The escape this rollout uses for robot ``robot`` (``tries``: with that many draws
+        per escape step instead of its own)."""
         if self.escape is None:
-            return ESCAPE_DEFAULTS.get(robot, ESCAPE_OFF)
-        if isinstance(self.escape, Escape):
-            return self.escape
-        return replace(ESCAPE_DEFAULTS.get(robot, Escape()), steps=self.escape)
+            esc = ESCAPE_DEFAULTS.get(robot, ESCAPE_OFF)
+        elif isinstance(self.escape, Escape):
+            esc = self.escape
+        else:
+            esc = replace(ESCAPE_DEFAULTS.get(robot, Escape()), steps=self.escape)
+        return esc if tries is None else replace(esc, tries=tries)
 
 
 class _GivenProblems(Scenario):
