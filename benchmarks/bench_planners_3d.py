@@ -9,6 +9,9 @@ Prints success, median and mean seconds per query, and each planner's median ove
 OMPL's (``ompl:RRTConnect`` with pointplan's certified motion checks).
 
     python benchmarks/bench_planners_3d.py --problems 40 --robots sphere3d,sshape
+
+A planner name ``policy@N`` is the policy planner with N draws per escape step instead of
+the robot's default (``--planners policy,policy@8,ompl:RRTConnect`` compares two in one run).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ def run_robot(
 
     from pointplan.evaluation import check_path
     from pointplan.planners import make_planner
+    from pointplan.planners.rollout import RolloutOptions
     from pointplan.scenes.scenarios import make_scenario
 
     torch.set_num_threads(1)
@@ -37,10 +41,15 @@ def run_robot(
     problems = sc.problems("test", n, seed=seed)
     built = {}
     for name in planners:
-        kw: dict[str, Any] = {"observation": observation} if name in ("policy", "hybrid", "hybrid-ompl") else {}
-        if name.startswith("ompl:"):
+        base, _, tries = name.partition("@")  # policy@8: the policy planner with 8 draws per escape step
+        kw: dict[str, Any] = {"observation": observation} if base in ("policy", "hybrid", "hybrid-ompl") else {}
+        if base.startswith("ompl:"):
             kw["time_limit"] = 10.0
-        built[name] = make_planner(name, sc.robot, **kw)
+        if tries:
+            if base != "policy" or not tries.isdigit() or int(tries) < 1:
+                raise SystemExit(f"{name!r}: only the policy planner takes @N (N draws per escape step, N >= 1)")
+            kw["escape"] = RolloutOptions().escape_for(sc.robot, int(tries))
+        built[name] = make_planner(base, sc.robot, **kw)
     out: dict[str, dict[str, Any]] = {k: {"times": [], "ok": 0} for k in planners}
     prep: list[float] = []
     for i, p in enumerate(problems):

@@ -29,9 +29,32 @@ def parse_config(text: str):  # type: ignore[no-untyped-def]
     if len(parts) not in (4, 5) or (len(parts) == 5 and parts[4] != "subgoal"):
         raise argparse.ArgumentTypeError(f"an escape is STEPS:NOISE:STILL:WINDOW[:subgoal][:tN] or 0, not {text!r}")
     try:
-        return Escape(steps=int(parts[0]), noise=float(parts[1]), still=float(parts[2]), window=int(parts[3]), subgoal=len(parts) == 5, tries=tries)
+        return Escape(
+            steps=int(parts[0]),
+            noise=float(parts[1]),
+            still=float(parts[2]),
+            window=int(parts[3]),
+            subgoal=len(parts) == 5,
+            tries=tries,
+        )
     except ValueError as e:
         raise argparse.ArgumentTypeError(str(e)) from e
+
+
+#: Slot's bands of opening widths, in bar thicknesses
+WIDTH_BANDS = (2.0, 2.5, 3.0, 4.0, 6.0, 8.0)
+
+
+def by_width(widths: list[float], success: list[bool]) -> dict[str, list[int]]:
+    """``{"a-b": [solved, problems]}`` per band of Slot's opening widths (metres in, bands in bar thicknesses)."""
+    from pointplan.robots.sshape import BAR_THICKNESS
+
+    bars = [w / BAR_THICKNESS for w in widths]
+    out = {}
+    for a, b in zip(WIDTH_BANDS[:-1], WIDTH_BANDS[1:]):
+        inside = [ok for x, ok in zip(bars, success) if a <= x < b or (b == WIDTH_BANDS[-1] and x == b)]
+        out[f"{a:g}-{b:g}"] = [int(sum(inside)), len(inside)]
+    return out
 
 
 def main() -> None:
@@ -42,7 +65,14 @@ def main() -> None:
     ap.add_argument("--env", default=None, help="scene id (default: the one the policy was trained in)")
     ap.add_argument("--episodes", type=int, default=500)
     ap.add_argument("--val-seed", type=int, default=0, help="which draw of validation problems")
-    ap.add_argument("--configs", type=parse_config, nargs="+", required=True, help="escapes, STEPS:NOISE:STILL:WINDOW[:subgoal] or 0")
+    ap.add_argument("--escape-seed", type=int, default=0, help="seed of the escape's random draws")
+    ap.add_argument(
+        "--configs",
+        type=parse_config,
+        nargs="+",
+        required=True,
+        help="escapes, STEPS:NOISE:STILL:WINDOW[:subgoal] or 0",
+    )
     ap.add_argument("--json", help="write the rows here")
     args = ap.parse_args()
     import torch
@@ -59,25 +89,53 @@ def main() -> None:
     problems = scenario.problems("val", args.episodes, seed=args.val_seed)
     rows = []
     for esc in args.configs:
-        planner = PolicyPlanner(policy, robot=scenario.robot, escape=esc)
+        planner = PolicyPlanner(policy, robot=scenario.robot, escape=esc, seed=args.escape_seed)
         t0 = time.perf_counter()
-        m = evaluate(planner, problems, scenario.robot, progress=False).metrics()
+        report = evaluate(planner, problems, scenario.robot, progress=False)
+        m = report.metrics()
         row = {
-            "escape": {"steps": esc.steps, "noise": esc.noise, "still": esc.still, "window": esc.window, "subgoal": esc.subgoal, "tries": esc.tries},
+            "escape": {
+                "steps": esc.steps,
+                "noise": esc.noise,
+                "still": esc.still,
+                "window": esc.window,
+                "subgoal": esc.subgoal,
+                "tries": esc.tries,
+            },
             "success": m["success_rate"],
             "mean_steps": m["nodes_mean"],
             "claims_disagree": m["planner_claims_disagree"],
             "wall_s": time.perf_counter() - t0,
         }
+        if "slot" in problems[0].scene.__dict__:  # Slot: solved per band of the opening's width (bar thicknesses)
+            row["by_width_bars"] = by_width(
+                [p.scene.__dict__["slot"]["width"] for p in problems], [r.success for r in report.records]
+            )
         rows.append(row)
         print(
             f"{esc}: {100 * row['success']:5.1f}% of {m['episodes']} val problems (draw {args.val_seed}) in {scenario.name}, "
-            f"{row['mean_steps']:.1f} steps, {row['claims_disagree']} claims disagree, {row['wall_s']:.0f} s",
+            f"{row['mean_steps']:.1f} steps, {row['claims_disagree']} claims disagree, {row['wall_s']:.0f} s"
+            + (
+                "".join(f"; {k} bars {v[0]}/{v[1]}" for k, v in row["by_width_bars"].items())
+                if "by_width_bars" in row
+                else ""
+            ),
             flush=True,
         )
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"checkpoint": ckpt, "env": scenario.name, "episodes": args.episodes, "val_seed": args.val_seed, "rows": rows}, f, indent=1)
+            json.dump(
+                {
+                    "checkpoint": ckpt,
+                    "env": scenario.name,
+                    "episodes": args.episodes,
+                    "val_seed": args.val_seed,
+                    "escape_seed": args.escape_seed,
+                    "rows": rows,
+                },
+                f,
+                indent=1,
+            )
 
 
 if __name__ == "__main__":

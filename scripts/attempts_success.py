@@ -66,7 +66,7 @@ def main() -> None:
     if args.escape_tries is not None:
         from pointplan.planners.rollout import RolloutOptions
 
-        escape = RolloutOptions(escape=args.escape).escape_for(scenario.robot.body, args.escape_tries)
+        escape = RolloutOptions(escape=args.escape).escape_for(scenario.robot, args.escape_tries)
     rows = []
     for k in args.attempts:
         planner = PolicyPlanner(policy, robot=scenario.robot, attempts=k, action_noise=args.action_noise, escape=escape)

@@ -82,6 +82,16 @@ def test_eval(checkpoint: Path, episodes: int, json_path: Path, greedy: bool = T
     return data[0] if isinstance(data, list) else data
 
 
+def patience_spent(curve: list[dict], patience: int) -> bool:
+    """Whether the last ``patience`` epochs of a BC cell's validation ``curve`` brought no
+    new best (the first epoch reaching the best counts); never with ``patience`` 0."""
+    if patience <= 0 or not curve:
+        return False
+    best = max(c["val_success"] for c in curve)
+    first = next(c["epochs"] for c in curve if c["val_success"] == best)
+    return int(curve[-1]["epochs"]) - int(first) >= patience
+
+
 def run_bc(cell: str, args: argparse.Namespace) -> dict:
     from pointplan.envs.core import EnvConfig
     from pointplan.learning.bc import (
@@ -137,6 +147,9 @@ def run_bc(cell: str, args: argparse.Namespace) -> dict:
             print(f"{cell} bc: resuming after {state['done']} epochs ({state_file})", file=sys.stderr)
     t0 = time.perf_counter() - before
     for done in range(start, args.bc_epochs + 1, args.bc_eval_every):
+        if patience_spent(curve, args.bc_patience):
+            print(f"{cell} bc: no better validation in {args.bc_patience} epochs, stopped", file=sys.stderr)
+            break
         try:
             fit_actor(
                 actor,
@@ -303,6 +316,12 @@ def main() -> int:
     )
     ap.add_argument("--bc-epochs", type=int, default=30)
     ap.add_argument("--bc-eval-every", type=int, default=5, help="epochs between validations")
+    ap.add_argument(
+        "--bc-patience",
+        type=int,
+        default=0,
+        help="stop a BC cell after this many epochs without a better validation (0: run all --bc-epochs)",
+    )
     ap.add_argument("--rl-steps", type=int, default=300_000, help="environment steps per RL cell")
     ap.add_argument("--rl-updates-per-step", type=float, default=0.25)
     ap.add_argument("--rl-eval-every", type=int, default=20_000)
@@ -340,7 +359,7 @@ def main() -> int:
             t0 = time.perf_counter()
             result = run_bc(cell, args) if args.method == "bc" else run_rl(cell, args)
             budget = (
-                {"demo_problems": args.bc_problems, "epochs": args.bc_epochs}
+                {"demo_problems": args.bc_problems, "epochs": args.bc_epochs, "patience": args.bc_patience}
                 if args.method == "bc"
                 else {"env_steps": args.rl_steps, "updates_per_step": args.rl_updates_per_step}
             )

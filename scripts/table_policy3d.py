@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> None:
                     continue
                 if args.attempts > 1 and scenario.scene("test", 0).dynamic:
                     continue
-                esc = RolloutOptions(escape=args.escape).escape_for(scenario.robot.body, args.escape_tries)
+                esc = RolloutOptions(escape=args.escape).escape_for(scenario.robot, args.escape_tries)
                 planner = make_planner(
                     "policy",
                     scenario.robot,

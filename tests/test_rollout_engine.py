@@ -69,6 +69,17 @@ def test_options_are_validated_once() -> None:
     opts = RolloutOptions(escape=4)
     assert opts.escape_for("sphere3d") == Escape(4, 0.0, 0.1, 6, True)  # the robot's kind, 4 steps
     assert RolloutOptions().escape_for("sshape") == ESCAPE_DEFAULTS["sshape"]
+    # a robot's own default before its body's; a name is looked up as the robot of that name
+    from pointplan.planners.rollout import default_escape
+    from pointplan.robots import make_robot
+
+    oriented = make_robot("sshape-oriented")
+    assert oriented.body == "sshape" and oriented.name != "sshape"
+    assert RolloutOptions().escape_for(oriented) == ESCAPE_DEFAULTS["sshape-oriented"] != ESCAPE_DEFAULTS["sshape"]
+    assert RolloutOptions().escape_for("sshape-oriented") == ESCAPE_DEFAULTS["sshape-oriented"]
+    assert RolloutOptions(escape=4).escape_for(oriented) == Escape(4, 2.0, 0.01, tries=64)
+    assert default_escape(make_robot("sshape")) == ESCAPE_DEFAULTS["sshape"]
+    assert default_escape("no-such-robot") is None
     assert RolloutOptions().escape_for("disc2d").steps == 0
     assert RolloutOptions(escape=4).escape_for("sshape", 1) == Escape(4, 2.0, 0.01, tries=1)  # fewer draws asked for
 

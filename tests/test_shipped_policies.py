@@ -104,7 +104,8 @@ def test_the_oriented_sshape_takes_its_slot_policy_and_its_paths_are_certified()
     assert planner.policy.robot.name == "sshape-oriented" and planner.policy.n_points == 64
     from pointplan.planners.rollout import ESCAPE_DEFAULTS
 
-    assert planner.escape == ESCAPE_DEFAULTS["sshape"]  # the same body, the same escape
+    assert planner.escape == ESCAPE_DEFAULTS["sshape-oriented"]  # its own: 64 draws a step, chosen in Slot
+    assert planner.escape.tries == 64 and ESCAPE_DEFAULTS["sshape"].tries == 8
     solved = 0
     for p in scenario.problems("val", 10, seed=0):
         res = planner.plan(p)

@@ -330,9 +330,7 @@ def _planner(name: str, robot: Robot, args: argparse.Namespace, seed: int) -> Pl
         if getattr(args, "escape_tries", None) is not None:
             from .planners.rollout import RolloutOptions
 
-            kwargs["escape"] = RolloutOptions(escape=getattr(args, "escape", None)).escape_for(
-                robot.body, args.escape_tries
-            )
+            kwargs["escape"] = RolloutOptions(escape=getattr(args, "escape", None)).escape_for(robot, args.escape_tries)
         if name == "hybrid":
             kwargs.update(max_nodes=given_nodes, seed=seed)
         if name in ("hybrid", "hybrid-ompl") and time_limit is not None:

@@ -448,7 +448,7 @@ class PPORun:
 
     # ------------------------------------------------------------------ validation
     def validate(self) -> dict[str, float]:
-        from ..planners.rollout import ESCAPE_DEFAULTS, rollout_batch
+        from ..planners.rollout import default_escape, rollout_batch
 
         robot, actor = self.robot, self.actor
         env = EnvConfig(observation=self.meta["observation"], n_points=self.meta["n_points"], split="val")
@@ -469,7 +469,7 @@ class PPORun:
         row["val_success"] = float(np.mean([r.success for r in res]))
         solved = [r.nodes for r in res if r.success]
         row["val_steps"] = float(np.mean(solved)) if solved else 0.0
-        escape = ESCAPE_DEFAULTS.get(robot.body)
+        escape = default_escape(robot)
         if self.cfg.eval_escape and escape is not None:
             res = rollout_batch(
                 act,

@@ -47,6 +47,7 @@ import numpy as np
 
 from ..envs.core import BatchedCore, EnvConfig, goal_reached, q_free
 from ..geometry.shapes import Box
+from ..robots import ROBOTS, make_robot
 from ..robots.base import Robot
 from ..robots.point import Disc2D, Sphere3D
 from ..scenes.scenarios import Scenario
@@ -111,25 +112,37 @@ class Escape:
         return self.steps > 0
 
 
-#: the escape a robot's policies plan with when none is given, chosen on validation
-#: problems (docs: "Escaping a stall"): the S-shape presses against an obstacle, so one
-#: still step starts ten sampled ones, each the furthest-moving of 64 draws (one rollout;
-#: 200 validation problems of 3D-Boxes, `local` 88.5 / 94.5 / 95.0 / 95.5% with 1 / 4 / 8 /
-#: 16 draws, `global` 86.0 / 92.0 / 94.0% with 1 / 4 / 8; then 500 of 3D-Boxes, `local`
-#: 94.4 / 94.8 / 95.4% with 8 / 32 / 64, `global` 92.8 / 94.6% with 8 / 64, and twice 500
-#: of Slot for the S-shape told its orientation, 90.8 and 92.4% with 8, 94.8 and 95.0% with
-#: 64); the sphere dithers in one place, so six steps that
+#: the escape a robot's policies plan with when none is given (by the robot's name, else
+#: its body's), chosen on validation problems (docs: "Escaping a stall"): the S-shape
+#: presses against an obstacle, so one still step starts ten sampled ones, each the
+#: furthest-moving of eight draws (one rollout; 200 validation problems of 3D-Boxes, `local`
+#: 88.5 / 94.5 / 95.0 / 95.5% with 1 / 4 / 8 / 16 draws, `global` 86.0 / 92.0 / 94.0% with
+#: 1 / 4 / 8; 64 draws gained 0.2-1.8 points on 500 for three times the time, so eight
+#: stay); the S-shape told its orientation, whose policy threads Slot's openings, takes 64
+#: (twice 500 validation problems of Slot: 90.8 and 92.4% with 8, 94.8 and 95.0% with 64);
+#: the sphere dithers in one place, so six steps that
 #: end within 0.1 of where they started start ten toward a random subgoal; the Panda, like
 #: the S-shape, presses against what blocks it (its cloned policy on 40 validation cells of
 #: ``armcells``: 4 solved without an escape, 20 with this one, 10 with the subgoal's); the
 #: UR5 takes the Panda's. Robots not named here plan without.
 ESCAPE_DEFAULTS: dict[str, Escape] = {
-    "sshape": Escape(steps=10, noise=2.0, still=0.01, tries=64),
+    "sshape": Escape(steps=10, noise=2.0, still=0.01, tries=8),
+    "sshape-oriented": Escape(steps=10, noise=2.0, still=0.01, tries=64),
     "panda": Escape(steps=10, noise=2.0, still=0.01),
     "ur5": Escape(steps=10, noise=2.0, still=0.01),
     "sphere3d": Escape(steps=10, noise=0.0, still=0.1, window=6, subgoal=True),
 }
 ESCAPE_OFF = Escape(steps=0)
+
+
+def default_escape(robot: Robot | str) -> Escape | None:
+    """The robot's default escape (:data:`ESCAPE_DEFAULTS`: by its name, else by its
+    body's name; a name is looked up as the robot registered under it), or ``None``."""
+    if isinstance(robot, str):
+        if robot in ESCAPE_DEFAULTS or robot not in ROBOTS:
+            return ESCAPE_DEFAULTS.get(robot)
+        robot = make_robot(robot)
+    return ESCAPE_DEFAULTS.get(robot.name, ESCAPE_DEFAULTS.get(robot.body))
 
 
 @dataclass(frozen=True)
@@ -182,15 +195,17 @@ class RolloutOptions:
         if int(self.chunk) < 1:
             raise ValueError(f"chunk must be >= 1, not {self.chunk}")
 
-    def escape_for(self, robot: str, tries: int | None = None) -> Escape:
-        """The escape this rollout uses for robot ``robot`` (``tries``: with that many draws
-        per escape step instead of its own)."""
+    def escape_for(self, robot: Robot | str, tries: int | None = None) -> Escape:
+        """The escape this rollout uses for ``robot`` (a robot, or a robot's name: its own
+        default, else its body's; ``tries``: with that many draws per escape step instead of
+        its own)."""
+        default = default_escape(robot)
         if self.escape is None:
-            esc = ESCAPE_DEFAULTS.get(robot, ESCAPE_OFF)
+            esc = default or ESCAPE_OFF
         elif isinstance(self.escape, Escape):
             esc = self.escape
         else:
-            esc = replace(ESCAPE_DEFAULTS.get(robot, Escape()), steps=self.escape)
+            esc = replace(default or Escape(), steps=self.escape)
         return esc if tries is None else replace(esc, tries=tries)
 
 
@@ -682,7 +697,7 @@ class RolloutEngine:
         meta_horizon = self.policy.meta.get("horizon") if self.policy is not None else None
         self.horizon = int(self.options.horizon or meta_horizon or 50)
         self.env = replace(env, horizon=self.horizon)
-        self.escape = self.options.escape_for(robot.body)  # (sshape-oriented: the S-shape's)
+        self.escape = self.options.escape_for(robot)
         self.observer_wrapper = observer_wrapper
         self.action_dim = len(robot.action_scale)
         #: the network as numpy arrays (weights as of now), or None: PyTorch on one thread
@@ -970,6 +985,7 @@ def rollout_batch(
 
 __all__ = [
     "ESCAPE_DEFAULTS",
+    "default_escape",
     "ESCAPE_OFF",
     "Escape",
     "GoalTester",
