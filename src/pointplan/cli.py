@@ -418,7 +418,7 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument(
         "--escape-tries",
         type=positive_int,
-        help="--planner policy or hybrid: each sampled step of an escape draws this many actions and takes the one whose free motion goes furthest (default: the robot's, 8 for the S-shape, chosen on validation; 1 is the plain escape)",
+        help="--planner policy or hybrid: each sampled step of an escape draws this many actions and takes the one whose free motion goes furthest (default: the robot's, chosen on validation: 8 for the S-shape, 64 for the S-shape told its orientation; 1 is the plain escape)",
     )
     p.add_argument(
         "--seed", type=non_negative_int, default=0, help="problem-set seed, 0 or more (default: %(default)s)"
