@@ -12,8 +12,11 @@ of ``pointplan eval``); ``--table-only`` reads them back. Policies come from the
 moving scene, where a rollout cannot start over. With ``--escape K`` a rollout takes K
 steps of the robot's escape wherever it is stuck (``pointplan eval --escape``): sampled
 actions for the S-shape (cells ``policy-local-escK``), steps toward a random subgoal for
-the sphere (cells ``policy-local-subK``), in every scene. Without it the policies plan
-with the mean action throughout, whatever the planner's default for the robot. Other
+the sphere (cells ``policy-local-subK``), in every scene. With ``--dodge N`` the
+rollouts among moving obstacles replace an action that would meet them where their last
+step's motion carries them by the nearest of standing still and N sampled ones that does
+not (``pointplan eval --dodge``; cells ``...-dodgeN`` in 3D-Dynamic). Without these the
+policies plan with the mean action throughout, whatever the planner's default. Other
 planner names (``birrt``, ``hybrid``: the robot's default policy, then Bi-RRT, 10 s a
 query) are built by ``make_planner`` with their defaults.
 """
@@ -22,11 +25,12 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 from pathlib import Path
 
 from pointplan.evaluation import evaluate
 from pointplan.planners import make_planner
-from pointplan.planners.rollout import RolloutOptions
+from pointplan.planners.rollout import DODGE_DEFAULT, DODGE_OFF, RolloutOptions
 from pointplan.scenes.scenarios import make_scenario
 
 #: the paper's success (%): Table 3 (trained on 3D-Boxes) and Table 4 (3D-Qureshi)
@@ -79,6 +83,8 @@ def run(args: argparse.Namespace) -> None:
                 if args.attempts > 1 and scenario.scene("test", 0).dynamic:
                     continue
                 esc = RolloutOptions(escape=args.escape).escape_for(scenario.robot, args.escape_tries)
+                moving = scenario.scene("test", 0).dynamic
+                dodge = replace(DODGE_DEFAULT, draws=args.dodge) if args.dodge and moving else DODGE_OFF
                 planner = make_planner(
                     "policy",
                     scenario.robot,
@@ -87,11 +93,14 @@ def run(args: argparse.Namespace) -> None:
                     scene=scene,
                     attempts=args.attempts,
                     escape=esc,
+                    dodge=dodge,
                 )
                 if args.escape > 0:
                     kind = "sub" if esc.subgoal else "esc"
                     tries = f"t{esc.tries}" if esc.tries > 1 else ""
                     planner_name = f"{planner_name}-{kind}{args.escape}{tries}"
+                if dodge.on:
+                    planner_name = f"{planner_name}-dodge{dodge.draws}"
                 if args.attempts > 1:
                     planner_name = f"{planner_name}-x{args.attempts}"
             else:
@@ -114,12 +123,13 @@ def table(robot: str) -> str:
 
     def order(
         name: str,
-    ) -> tuple[str, int, int, int]:  # policy-OBS[-escK[tN]|-subK][-xK]: observation, escape, tries, attempts
+    ) -> tuple[str, int, int, int, int]:  # policy-OBS[-escK[tN]|-subK][-dodgeD][-xK]
         parts = name.split("-")[2:]
         kind = next((p[3:] for p in parts if p.startswith(("esc", "sub"))), "0")
         esc, _, tries = kind.partition("t")
+        dodge = next((int(p[5:]) for p in parts if p.startswith("dodge")), 0)
         att = next((int(p[1:]) for p in parts if p.startswith("x")), 1)
-        return name.split("-")[1], int(esc), int(tries or 1), att
+        return name.split("-")[1], int(esc), int(tries or 1), dodge, att
 
     base = ("policy-global", "policy-local")
     tried = sorted({p.stem.split("_", 2)[2] for p in OUT.glob(f"{robot}_*_policy-*.json")} - set(base), key=order)
@@ -171,6 +181,12 @@ def main() -> None:
         type=int,
         default=None,
         help="policy planners: draws per escape step, the furthest free motion taken (default: the robot's; cells named -escKtN where N > 1)",
+    )
+    ap.add_argument(
+        "--dodge",
+        type=int,
+        default=0,
+        help="policy planners in 3D-Dynamic: draws of the dodge among moving obstacles (cells named -dodgeN; default: 0, none)",
     )
     ap.add_argument("--table-only", action="store_true")
     ap.add_argument("--quiet", action="store_true")

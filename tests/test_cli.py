@@ -522,6 +522,24 @@ def test_eval_escape_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
         main(["eval", "--planner", "policy", "--episodes", "2", "--escape-tries", "0", "--quiet"])
 
 
+def test_eval_dodge_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--dodge`` reaches the policy planner among moving obstacles (on by default, 0: off);
+    other planners are refused."""
+    args = ["eval", "--env", "dynamic3d", "--robot", "sshape", "--observation", "local", "--planner", "policy"]
+    runs = {}
+    for k in (0, 16):
+        out = tmp_path / f"dodge{k}.json"
+        assert main([*args, "--episodes", "12", "--dodge", str(k), "--json", str(out), "--quiet"]) == 0
+        runs[k] = json.loads(out.read_text())
+    default = tmp_path / "default.json"
+    assert main([*args, "--episodes", "12", "--json", str(default), "--quiet"]) == 0
+    assert json.loads(default.read_text())["collision_checks_mean"] == runs[16]["collision_checks_mean"]
+    assert runs[16]["collision_checks_mean"] > runs[0]["collision_checks_mean"]  # the screen's checks count
+    assert runs[16]["success_rate"] >= runs[0]["success_rate"]
+    assert main(["eval", "--planner", "birrt", "--episodes", "2", "--dodge", "3", "--quiet"]) == 2
+    assert "--dodge" in capsys.readouterr().err
+
+
 def test_eval_attempts_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``--attempts`` reaches the policy planner; other planners and bad noise are refused."""
     out = tmp_path / "m.json"

@@ -16,7 +16,7 @@ from .straight import StraightLine
 
 if TYPE_CHECKING:
     from ..models.mpnet import MPNet
-    from .rollout import Escape
+    from .rollout import Dodge, Escape
 
 #: name -> factory ``(robot, **kw) -> Planner``; add planners with :func:`register_planner`
 PLANNERS: dict[str, Callable[..., Planner]] = {"birrt": BiRRT, "straight": StraightLine}
@@ -56,6 +56,7 @@ def _hybrid_factory(
     attempts: int = 1,
     action_noise: float = 1.0,
     escape: Escape | int | None = None,
+    dodge: Dodge | None = None,
     fallback: str = "birrt",
     time_limit: float | None = 10.0,
     horizon: int | None = None,
@@ -68,7 +69,8 @@ def _hybrid_factory(
     motion checks; other keywords go to :class:`~pointplan.planners.ompl.OMPLPlanner`).
     ``time_limit``: seconds for the whole query (10 by default; the Bi-RRT fallback then
     has no node budget unless ``max_nodes`` is given; ``None``: Bi-RRT's 10,000 nodes). ``attempts``, ``action_noise``,
-    ``escape``: the policy's sampled retries and stall escapes (:class:`PolicyPlanner`)."""
+    ``escape``, ``dodge``: the policy's sampled retries, stall escapes and dodge among moving
+    obstacles (:class:`PolicyPlanner`)."""
     from .hybrid import HybridPlanner
 
     policy = _policy_factory(
@@ -81,6 +83,7 @@ def _hybrid_factory(
         attempts=attempts,
         action_noise=action_noise,
         escape=escape,
+        dodge=dodge,
         horizon=horizon,
     )
     if fallback.lower() == "birrt":

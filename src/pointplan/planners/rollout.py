@@ -12,6 +12,8 @@ rollout, each written once in the step loop (:func:`_loop`):
 - the escape (:class:`Escape`): sampled actions, or the mean action toward a random
   subgoal, for a few steps where the robot is stuck;
 - the crush rule: a moving obstacle that runs into the robot ends its rollout;
+- the dodge (:class:`Dodge`): among moving obstacles, an action whose move would meet
+  them where they are foreseen to be is replaced by a sampled one that does not;
 - sampled attempts: when the mean-action rollout fails, roll out again from the start
   with sampled actions;
 - the goal connection: a rollout that stops within the goal tolerance ends at the goal
@@ -46,6 +48,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..envs.core import BatchedCore, EnvConfig, goal_reached, q_free
+from ..geometry.collision import CollisionWorld
 from ..geometry.shapes import Box
 from ..robots import ROBOTS, make_robot
 from ..robots.base import Robot
@@ -135,6 +138,46 @@ ESCAPE_DEFAULTS: dict[str, Escape] = {
 ESCAPE_OFF = Escape(steps=0)
 
 
+@dataclass(frozen=True)
+class Dodge:
+    """Keeping out of moving obstacles' way. A policy sees the obstacles as they are; one
+    that is moving may run into the robot within the next steps (which ends the rollout).
+    Before each step among moving obstacles, the chosen action (the mean, or the escape's)
+    is screened against where the obstacles are foreseen to be
+    (:meth:`~pointplan.scenes.scene.Scene.predicted_world`: their motion over the last
+    step carried on): its move must be free of them at the step's end, and where it ends
+    must stay free of them for ``lookahead`` steps more. An action that fails is replaced
+    by the one nearest to it (in action space) that passes, among standing still and
+    ``draws`` sampled actions ``tanh(mean + noise * std * N(0, 1))``; where none passes,
+    it stays. Static scenes: nothing to do. ``draws = 0``: off."""
+
+    draws: int = 16
+    noise: float = 1.0
+    lookahead: int = 3
+
+    def __post_init__(self) -> None:
+        for name in ("draws", "lookahead"):
+            v = getattr(self, name)
+            if int(v) != v or v < 0:
+                raise ValueError(f"dodge {name} must be an integer >= 0, not {v}")
+            object.__setattr__(self, name, int(v))
+        if not np.isfinite(self.noise) or self.noise < 0:
+            raise ValueError(f"dodge noise must be a finite number >= 0, not {self.noise}")
+
+    @property
+    def on(self) -> bool:
+        return self.draws > 0
+
+
+#: the dodge every robot's rollouts take among moving obstacles when none is given, chosen
+#: on validation problems of 3D-Dynamic (docs: "Keeping out of the boxes' way"): the
+#: S-shape's `local` policy with its escape solves 55.5 / 83.0 / 90.0 / 93.0 / 93.0% of 200
+#: with no dodge / a look ahead of 1 / 2 / 3 / 4 steps (16 draws, noise 1), and 62.8 / 91.6
+#: / 93.8% of another 500 with none / 2 / 3; 8 or 32 draws, noise 0.5, 1.5 or 2 no better
+DODGE_DEFAULT = Dodge()
+DODGE_OFF = Dodge(draws=0)
+
+
 def default_escape(robot: Robot | str) -> Escape | None:
     """The robot's default escape (:data:`ESCAPE_DEFAULTS`: by its name, else by its
     body's name; a name is looked up as the robot registered under it), or ``None``."""
@@ -159,7 +202,8 @@ class RolloutOptions:
     ``compiled``: use the compiled rollout where it applies. ``crush_ends=False`` is for
     comparisons only: a moving obstacle that runs into the robot no longer ends its
     rollout (a success may then have touched an obstacle; ``info["crushed"]`` counts the
-    steps it was hit)."""
+    steps it was hit). ``dodge``: a :class:`Dodge` for moving obstacles (``None``: the
+    default, :data:`DODGE_DEFAULT`; :data:`DODGE_OFF`: none)."""
 
     horizon: int | None = None
     greedy_goal: bool = True
@@ -174,6 +218,7 @@ class RolloutOptions:
     seed: int = 0
     compiled: bool = True
     crush_ends: bool = True
+    dodge: Dodge | None = None
     #: problems stepped together by :meth:`RolloutEngine.run`
     chunk: int = field(default=100, metadata={"min": 1})
 
@@ -194,6 +239,8 @@ class RolloutOptions:
             Escape(steps=self.escape)  # validates the number of steps
         if int(self.chunk) < 1:
             raise ValueError(f"chunk must be >= 1, not {self.chunk}")
+        if self.dodge is not None and not isinstance(self.dodge, Dodge):
+            raise TypeError(f"dodge must be a Dodge or None, not {type(self.dodge).__name__}")
 
     def escape_for(self, robot: Robot | str, tries: int | None = None) -> Escape:
         """The escape this rollout uses for ``robot`` (a robot, or a robot's name: its own
@@ -458,6 +505,7 @@ class _Lockstep(_Stepper):
         nrng: np.random.Generator,
         noise: float,
         esc: Escape,
+        dodge: Dodge = DODGE_OFF,
     ) -> None:
         self.act, self.robot, self.problems = act, robot, problems
         self.core = BatchedCore(_GivenProblems(robot, int(env.horizon or 0)), len(problems), env)
@@ -466,17 +514,65 @@ class _Lockstep(_Stepper):
         self.pending_checks: Any = 0  # motion checks of the screened escape's draws, counted with the step
         self.sampled = esc.on or noise > 0
         self._testers: dict[int, GoalTester] = {}
+        self.moving = np.array([p.scene.dynamic for p in problems])
+        self.dodge = dodge if self.moving.any() else DODGE_OFF
 
     def actions(self, st: _State, t: int, escaping: np.ndarray, target: np.ndarray) -> np.ndarray:
         core = self.core
         obs = core.observe(self.rng)["observation"]  # (at each problem's own time step)
         if not self.sampled:
-            return np.asarray(self.act(obs, core.q.copy(), core.goal.copy()), np.float32)
-        scale = np.where(escaping, self.esc.noise, self.noise)
-        draw = self.nrng.standard_normal((len(self.problems), len(self.robot.action_scale)))
-        a = np.asarray(self.act(obs, core.q.copy(), target.copy(), noise=scale[:, None] * draw), np.float32)
-        if self.esc.tries > 1 and escaping.any():
-            a = self._furthest(obs, target, escaping, a)
+            a = np.asarray(self.act(obs, core.q.copy(), core.goal.copy()), np.float32)
+        else:
+            scale = np.where(escaping, self.esc.noise, self.noise)
+            draw = self.nrng.standard_normal((len(self.problems), len(self.robot.action_scale)))
+            a = np.asarray(self.act(obs, core.q.copy(), target.copy(), noise=scale[:, None] * draw), np.float32)
+            if self.esc.tries > 1 and escaping.any():
+                a = self._furthest(obs, target, escaping, a)
+        if self.dodge.on:
+            a = self._dodge(obs, target, st.active & self.moving, a)
+        return a
+
+    def _clear(self, a: np.ndarray, ends: Any, later: list[Any]) -> tuple[np.ndarray, np.ndarray]:
+        """Whether each action's move is free among the obstacles foreseen at the step's
+        end (``ends``) and its end pose among those foreseen after (``later``); the checks."""
+        core = self.core
+        tw = np.clip(a.astype(np.float64), -1.0, 1.0) * self.robot.action_scale
+        q1, collided, n = q_free(
+            self.robot, ends, core.q, tw, core.low, core.high, core.config.substep, core.config.bounds == "clip"
+        )
+        ok = ~np.asarray(collided, bool)
+        for w in later:
+            ok &= ~self.robot.collides(w, q1[:, None])[:, 0]
+        return ok, np.asarray(n) + len(later)
+
+    def _dodge(self, obs: np.ndarray, target: np.ndarray, moving: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """The :class:`Dodge` for the robots ``moving``: actions ``a`` kept where they pass
+        the screen, else replaced by the nearest of standing still and the sampled draws
+        that does."""
+        core, d = self.core, self.dodge
+        scenes = [p.scene for p in self.problems]
+
+        def foreseen(k: int) -> Any:  # each problem at its own time, k steps ahead
+            return CollisionWorld.stack([s.predicted_world(int(t), int(t) + k) for s, t in zip(scenes, core.t)])
+
+        ends, later = foreseen(1), [foreseen(1 + h) for h in range(1, d.lookahead + 1)]
+        ok, n = self._clear(a, ends, later)
+        checks = np.where(moving, n, 0)
+        bad = moving & ~ok
+        if bad.any():
+            best, gap = a.copy(), np.full(len(a), np.inf)
+            q0, draws = core.q.copy(), [np.zeros_like(a)]
+            for _ in range(d.draws):
+                noise = d.noise * self.nrng.standard_normal(a.shape)
+                draws.append(np.asarray(self.act(obs, q0.copy(), target.copy(), noise=noise), np.float32))
+            for b in draws:
+                ok, n = self._clear(b, ends, later)
+                checks += np.where(bad, n, 0)
+                dist = np.linalg.norm(b - a, axis=-1)
+                take = bad & ok & (dist < gap)
+                best[take], gap[take] = b[take], dist[take]
+            a = best
+        self.pending_checks = self.pending_checks + checks
         return a
 
     def _free_move(self, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -698,6 +794,7 @@ class RolloutEngine:
         self.horizon = int(self.options.horizon or meta_horizon or 50)
         self.env = replace(env, horizon=self.horizon)
         self.escape = self.options.escape_for(robot)
+        self.dodge = DODGE_DEFAULT if self.options.dodge is None else self.options.dodge
         self.observer_wrapper = observer_wrapper
         self.action_dim = len(robot.action_scale)
         #: the network as numpy arrays (weights as of now), or None: PyTorch on one thread
@@ -731,7 +828,8 @@ class RolloutEngine:
                 if noise_rng is not None
                 else np.random.default_rng(np.random.SeedSequence([opts.seed, c0, 0x6E6F6973]))
             )
-            sp = _Lockstep(act, self.robot, self.env, probs, rng, nrng, opts.noise, self.escape)
+            dodge = self.dodge if opts.dodge is None else opts.dodge
+            sp = _Lockstep(act, self.robot, self.env, probs, rng, nrng, opts.noise, self.escape, dodge)
             greedy = np.array([opts.greedy_goal and not p.scene.dynamic for p in probs])
             st = _State(sp.core.q.copy(), sp.core.goal.copy(), self.horizon, greedy)
             _loop(sp, st, self.horizon, opts, self.escape)
@@ -963,10 +1061,11 @@ def rollout_batch(
     noise: float = 0.0,
     noise_rng: np.random.Generator | None = None,
     crush_ends: bool = True,
+    dodge: Dodge | None = None,
 ) -> list[PlanResult]:
     """:meth:`RolloutEngine.run` with the plain rollout's defaults: the mean action to
-    the horizon or the goal tolerance, no goal connection, no greedy goal test, no escape
-    (training validation, DAgger and PPO call this). ``greedy_goal`` raises a ValueError
+    the horizon or the goal tolerance, no goal connection, no greedy goal test, no escape,
+    no dodge (training validation, DAgger and PPO call this). ``greedy_goal`` raises a ValueError
     when a scene has moving obstacles."""
     if greedy_goal and any(p.scene.dynamic for p in problems):
         raise ValueError("greedy_goal connects to the goal in static scenes only")
@@ -978,12 +1077,16 @@ def rollout_batch(
         noise=noise,
         seed=seed,
         crush_ends=crush_ends,
+        dodge=dodge if dodge is not None else DODGE_OFF,
         chunk=chunk,
     )
     return RolloutEngine(act, robot, env, opts).run(problems, noise_rng=noise_rng)
 
 
 __all__ = [
+    "DODGE_DEFAULT",
+    "DODGE_OFF",
+    "Dodge",
     "ESCAPE_DEFAULTS",
     "default_escape",
     "ESCAPE_OFF",

@@ -51,6 +51,11 @@ class Scene:
         """The packed obstacles at time step ``t``."""
         return self.world
 
+    def predicted_world(self, now: int, t: int) -> CollisionWorld:
+        """The obstacles at time step ``t`` as foreseen at step ``now`` (a static scene:
+        as they are)."""
+        return self.world
+
 
 class DynamicScene(Scene):
     """Boxes that move: box ``k`` goes from its placement in ``obstacles`` (time 0) to its
@@ -113,6 +118,26 @@ class DynamicScene(Scene):
             return []
         c, r = self.poses_at(t)
         return [Box(ci, b.size, ri) for ci, ri, b in zip(c, r, self.obstacles)]  # type: ignore[union-attr]
+
+    def predicted_world(self, now: int, t: int) -> CollisionWorld:
+        """The boxes at time step ``t`` as foreseen at step ``now`` from what was seen up to
+        then: their motion from ``now - 1`` to ``now`` carried on at the same speed (centres
+        along a line, rotations at a constant angular velocity); at step 0, where they are.
+        Not cached: each ``now`` foresees its own."""
+        if not self.boxes:
+            return self.world
+        c, r = self.predicted_poses(now, t)
+        return CollisionWorld.from_shapes([Box(ci, b.size, ri) for ci, ri, b in zip(c, r, self.boxes)], self.dim)
+
+    def predicted_poses(self, now: int, t: int) -> tuple[Array, Array]:
+        """Box centres ``(K, 3)`` and rotations ``(K, 3, 3)`` of :meth:`predicted_world`."""
+        from ..geometry import lie
+
+        c1, r1 = self.poses_at(now)
+        c0, r0 = self.poses_at(now - 1) if now > 0 else (c1, r1)
+        k = float(t - now)
+        spin = lie.so3_log(np.swapaxes(r0, -1, -2) @ r1)  # the last step's turn, in each box's frame
+        return c1 + k * (c1 - c0), r1 @ lie.so3_exp(k * spin)
 
     def world_at(self, t: int) -> CollisionWorld:
         t = int(t) % self.period
