@@ -22,6 +22,10 @@ obstacles. Problems whose start or goal collides with the cloud are listed apart
     python benchmarks/bench_mbm.py --summary mbm_panda.jsonl
     python benchmarks/bench_mbm.py --arm panda --problems 10 --cameras 2 --out mbm_panda_cameras.jsonl
     python benchmarks/bench_mbm.py --planners policy,hybrid,ompl:RRTConnect --checkpoint bc.pt --out mbm_policy.jsonl
+
+``policy@N`` (and ``hybrid@N``) is the learned planner with N draws per escape step instead
+of the arm's default (``--planners policy,policy@1`` compares the screened escape with the
+plain one in one run).
 """
 
 from __future__ import annotations
@@ -108,13 +112,21 @@ def run(args: argparse.Namespace) -> None:
 
 def _planner(name: str, robot: Any, args: argparse.Namespace) -> Any:
     """A planner by name; the learned ones (``policy``, ``hybrid``, ``hybrid-ompl``) take
-    ``--checkpoint``, and the policy alone has no time limit (its horizon ends it)."""
+    ``--checkpoint``, and the policy alone has no time limit (its horizon ends it).
+    ``policy@N``, ``hybrid@N``: with N draws per escape step instead of the arm's default."""
     from pointplan.planners import make_planner
+    from pointplan.planners.rollout import RolloutOptions
 
-    if name == "policy":
-        return make_planner(name, robot, checkpoint=args.checkpoint)
-    if name.startswith("hybrid"):
-        return make_planner(name, robot, checkpoint=args.checkpoint, time_limit=args.time_limit)
+    base, _, tries = name.partition("@")
+    kw: dict[str, Any] = {}
+    if tries:
+        if not (base == "policy" or base.startswith("hybrid")) or not tries.isdigit() or int(tries) < 1:
+            raise SystemExit(f"{name!r}: only the policy and the hybrids take @N (N draws per escape step, N >= 1)")
+        kw["escape"] = RolloutOptions().escape_for(robot, int(tries))
+    if base == "policy":
+        return make_planner(base, robot, checkpoint=args.checkpoint, **kw)
+    if base.startswith("hybrid"):
+        return make_planner(base, robot, checkpoint=args.checkpoint, time_limit=args.time_limit, **kw)
     return make_planner(name, robot, time_limit=args.time_limit)
 
 
