@@ -128,13 +128,13 @@ class Escape:
 #: the S-shape, presses against what blocks it (its cloned policy on 40 validation cells of
 #: ``armcells``: 4 solved without an escape, 20 with this one, 10 with the subgoal's), each
 #: step the furthest-moving of eight draws (its tuned policy on 200 validation cells: 53.0%
-#: with one draw, 65.5% with eight); the UR5 takes the Panda's. Robots not named here plan
-#: without.
+#: with one draw, 65.5% with eight); the UR5 takes the Panda's (its policy: 23.5 -> 34.0%).
+#: Robots not named here plan without.
 ESCAPE_DEFAULTS: dict[str, Escape] = {
     "sshape": Escape(steps=10, noise=2.0, still=0.01, tries=8),
     "sshape-oriented": Escape(steps=10, noise=2.0, still=0.01, tries=64),
     "panda": Escape(steps=10, noise=2.0, still=0.01, tries=8),
-    "ur5": Escape(steps=10, noise=2.0, still=0.01),
+    "ur5": Escape(steps=10, noise=2.0, still=0.01, tries=8),
     "sphere3d": Escape(steps=10, noise=0.0, still=0.1, window=6, subgoal=True),
 }
 ESCAPE_OFF = Escape(steps=0)
