@@ -11,14 +11,17 @@ OMPL's (``ompl:RRTConnect`` with pointplan's certified motion checks).
     python benchmarks/bench_planners_3d.py --problems 40 --robots sphere3d,sshape
 
 A planner name ``policy@N`` is the policy planner with N draws per escape step instead of
-the robot's default (``--planners policy,policy@8,ompl:RRTConnect`` compares two in one run).
+the robot's default (``--planners policy,policy@8,ompl:RRTConnect`` compares two in one run);
+``policy@NlL`` also looks ahead L steps from each draw (``policy@8l0``: by its own motion).
 """
 
 from __future__ import annotations
 
 import argparse
 import gc
+import re
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -46,9 +49,14 @@ def run_robot(
         if base.startswith("ompl:"):
             kw["time_limit"] = 10.0
         if tries:
-            if base != "policy" or not tries.isdigit() or int(tries) < 1:
-                raise SystemExit(f"{name!r}: only the policy planner takes @N (N draws per escape step, N >= 1)")
-            kw["escape"] = RolloutOptions().escape_for(sc.robot, int(tries))
+            m = re.fullmatch(r"(\d+)(?:l(\d+))?", tries)
+            if base != "policy" or m is None or int(m[1]) < 1:
+                raise SystemExit(
+                    f"{name!r}: only the policy planner takes @N or @NlL (N >= 1 draws per escape step, L steps of lookahead)"
+                )
+            kw["escape"] = RolloutOptions().escape_for(sc.robot, int(m[1]))
+            if m[2] is not None:
+                kw["escape"] = replace(kw["escape"], lookahead=int(m[2]))
         built[name] = make_planner(base, sc.robot, **kw)
     out: dict[str, dict[str, Any]] = {k: {"times": [], "ok": 0} for k in planners}
     prep: list[float] = []

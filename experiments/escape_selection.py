@@ -6,7 +6,10 @@ Rules (``--rules``): ``far`` the furthest free motion from where the robot is; `
 draw whose free end is nearest the goal; ``x`` the most progress across the wall toward
 the goal's side; ``value`` / ``value:L`` the draw whose end the PPO run's value network
 rates highest (plus ``L`` times the normalised motion); ``mix`` / ``mixq`` half / a quarter
-of the draws uniform in the action box instead of from the policy, then the furthest.
+of the draws uniform in the action box instead of from the policy, then the furthest;
+``lookgoal:D`` / ``lookfar:D`` the mean action followed for ``D`` steps from each draw's
+free end (observed there, each step's motion free as far as it goes), then the draw whose
+lookahead ends nearest the goal / furthest from where the robot is (an arrival wins).
 The rules other than ``far`` replace the one-robot stepper's selection for this run only
 (the compiled rollout is turned off so that every rule runs in the same Python loop):
 
@@ -26,7 +29,9 @@ def main() -> None:
     ap.add_argument("--tries", type=int, default=32)
     ap.add_argument("--rules", nargs="+", default=["far", "goal", "x"])
     ap.add_argument("--episodes", type=int, default=500, help="validation problems drawn (the thin ones are kept)")
-    ap.add_argument("--value", default="checkpoints/slot_oriented_local_ppo_last.pt", help="PPO state with the value network")
+    ap.add_argument(
+        "--value", default="checkpoints/slot_oriented_local_ppo_last.pt", help="PPO state with the value network"
+    )
     args = ap.parse_args()
     import torch
 
@@ -70,6 +75,10 @@ def main() -> None:
             self.pending_checks += int(np.sum(n))
             cands.append((a, q1[0], float(np.asarray(robot.distance(q1, q[None]))[0])))
         d = np.array([c[2] for c in cands])
+        if rule.startswith("look"):
+            s = np.array([lookahead(self, c[1], target, int(lam), q) for c in cands])
+            s = np.where(d < 1e-3, -np.inf, s)
+            return cands[int(np.argmax(s))][0] if np.isfinite(s).any() else cands[int(np.argmax(d))][0]
         if rule in ("far", "mix", "mixq"):
             return cands[int(np.argmax(d))][0]
         if rule == "goal":
@@ -87,16 +96,35 @@ def main() -> None:
         s = np.where(d < 1e-3, -np.inf, s)  # a draw that does not move is never taken
         return cands[int(np.argmax(s))][0] if np.isfinite(s).any() else cands[int(np.argmax(d))][0]
 
+    def lookahead(self, q1, target, steps, q0):  # type: ignore[no-untyped-def]
+        eng, qk = self.engine, q1.copy()
+        for _ in range(steps):
+            u = eng._uniforms(self.observer.draws_one())[: self.observer.draws_one()]
+            a = eng._act(self.observer.observe_one(qk, u=u), qk, target, None)
+            qn, _, n = self._free_move(qk[None], np.asarray(a, np.float32)[None])
+            self.pending_checks += int(np.sum(n))
+            qk = qn[0]
+            if float(np.asarray(robot.distance(qk[None], target[None]))[0]) < 0.05:
+                return np.inf
+        if rule == "lookfar":
+            return float(np.asarray(robot.distance(qk[None], q0[None]))[0])
+        return -float(np.asarray(robot.distance(qk[None], target[None]))[0])
+
     R._OneRobot._furthest = select  # type: ignore[method-assign]
     for spec in args.rules:
         rule, _, l_text = spec.partition(":")
         lam = float(l_text) if l_text else 0.0
-        planner = PolicyPlanner(policy, robot=robot, escape=Escape(steps=10, noise=2.0, still=0.01, tries=args.tries), compiled=False)
+        planner = PolicyPlanner(
+            policy, robot=robot, escape=Escape(steps=10, noise=2.0, still=0.01, tries=args.tries), compiled=False
+        )
         t0 = time.perf_counter()
         report = evaluate(planner, thin, robot, progress=False)
         ok = sum(r.success for r in report.records)
         steps = np.mean([len(r.path) - 1 for r in report.records])
-        print(f"{spec}, {args.tries} draws: {ok}/{len(thin)} thin openings solved, {steps:.1f} steps, {time.perf_counter() - t0:.0f} s", flush=True)
+        print(
+            f"{spec}, {args.tries} draws: {ok}/{len(thin)} thin openings solved, {steps:.1f} steps, {time.perf_counter() - t0:.0f} s",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

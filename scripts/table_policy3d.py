@@ -83,6 +83,8 @@ def run(args: argparse.Namespace) -> None:
                 if args.attempts > 1 and scenario.scene("test", 0).dynamic:
                     continue
                 esc = RolloutOptions(escape=args.escape).escape_for(scenario.robot, args.escape_tries)
+                if args.escape_lookahead is not None:
+                    esc = replace(esc, lookahead=args.escape_lookahead)
                 moving = scenario.scene("test", 0).dynamic
                 dodge = replace(DODGE_DEFAULT, draws=args.dodge) if args.dodge and moving else DODGE_OFF
                 planner = make_planner(
@@ -98,6 +100,7 @@ def run(args: argparse.Namespace) -> None:
                 if args.escape > 0:
                     kind = "sub" if esc.subgoal else "esc"
                     tries = f"t{esc.tries}" if esc.tries > 1 else ""
+                    tries += f"l{esc.lookahead}" if esc.lookahead and esc.tries > 1 else ""
                     planner_name = f"{planner_name}-{kind}{args.escape}{tries}"
                 if dodge.on:
                     planner_name = f"{planner_name}-dodge{dodge.draws}"
@@ -181,6 +184,12 @@ def main() -> None:
         type=int,
         default=None,
         help="policy planners: draws per escape step, the furthest free motion taken (default: the robot's; cells named -escKtN where N > 1)",
+    )
+    ap.add_argument(
+        "--escape-lookahead",
+        type=int,
+        default=None,
+        help="policy planners: each escape draw judged by this many steps of the mean action from its end (default: the robot's; cells named -escKtNlL where L > 0)",
     )
     ap.add_argument(
         "--dodge",

@@ -520,6 +520,15 @@ def test_eval_escape_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert "--escape-tries" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["eval", "--planner", "policy", "--episodes", "2", "--escape-tries", "0", "--quiet"])
+    # --escape-lookahead too: another lookahead than the default's, a different rollout
+    from pointplan.planners.rollout import ESCAPE_DEFAULTS
+
+    other = "0" if ESCAPE_DEFAULTS["sshape"].lookahead else "3"
+    out = tmp_path / "look.json"
+    assert main([*args, "--escape", "10", "--escape-lookahead", other, "--json", str(out), "--quiet"]) == 0
+    assert json.loads(out.read_text())["collision_checks_mean"] != runs[10]["collision_checks_mean"]
+    assert main(["eval", "--planner", "birrt", "--episodes", "2", "--escape-lookahead", "3", "--quiet"]) == 2
+    assert "--escape-lookahead" in capsys.readouterr().err
 
 
 def test_eval_dodge_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

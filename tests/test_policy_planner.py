@@ -347,7 +347,9 @@ def test_escape_samples_only_after_a_stall(observation: str) -> None:
     ckpt = shipped_checkpoint("sshape", observation)
     plain = PolicyPlanner(ckpt, robot=robot, escape=0)
     esc = PolicyPlanner(ckpt, robot=robot, escape=Escape(steps=10, noise=2.0, still=0.01))
-    assert PolicyPlanner(ckpt, robot=robot).escape == Escape(10, 2.0, 0.01, tries=8)  # the S-shape's default
+    assert PolicyPlanner(ckpt, robot=robot).escape == Escape(
+        10, 2.0, 0.01, tries=8, lookahead=3
+    )  # the S-shape's default
     stalled = solved_plain = solved_esc = 0
     for p in sc.problems("val", 16, seed=0):
         a, b = plain.plan(p), esc.plan(p)

@@ -77,11 +77,14 @@ def test_options_are_validated_once() -> None:
     assert oriented.body == "sshape" and oriented.name != "sshape"
     assert RolloutOptions().escape_for(oriented) == ESCAPE_DEFAULTS["sshape-oriented"] != ESCAPE_DEFAULTS["sshape"]
     assert RolloutOptions().escape_for("sshape-oriented") == ESCAPE_DEFAULTS["sshape-oriented"]
-    assert RolloutOptions(escape=4).escape_for(oriented) == Escape(4, 2.0, 0.01, tries=64)
+    assert RolloutOptions(escape=4).escape_for(oriented) == Escape(4, 2.0, 0.01, tries=64, lookahead=3)
     assert default_escape(make_robot("sshape")) == ESCAPE_DEFAULTS["sshape"]
     assert default_escape("no-such-robot") is None
     assert RolloutOptions().escape_for("disc2d").steps == 0
-    assert RolloutOptions(escape=4).escape_for("sshape", 1) == Escape(4, 2.0, 0.01, tries=1)  # fewer draws asked for
+    assert RolloutOptions(escape=4).escape_for("sshape", 1) == Escape(
+        4, 2.0, 0.01, tries=1, lookahead=3
+    )  # fewer draws asked for
+    assert not RolloutOptions(escape=4).escape_for("sshape", 1).stepped  # (one draw: nothing to look ahead from)
 
 
 def test_stall_ends_a_rollout_in_every_stepper() -> None:
@@ -113,7 +116,7 @@ def test_screened_escape_takes_the_furthest_free_draw() -> None:
         with pytest.raises(ValueError, match="tries"):
             Escape(tries=bad)  # type: ignore[arg-type]
     sc = make_scenario("boxes3d", robot="sshape")
-    esc = replace(ESCAPE_DEFAULTS["sshape"], tries=6)
+    esc = replace(ESCAPE_DEFAULTS["sshape"], tries=6, lookahead=0)
     planner = PolicyPlanner(shipped_checkpoint("sshape", "local"), escape=esc)
     eng = planner.engine
     p = sc.problem("val", 0, seed=0)
@@ -152,7 +155,7 @@ def test_screened_escape_in_lockstep_among_moving_obstacles() -> None:
     from pointplan.planners.rollout import _Lockstep
 
     sc = make_scenario("dynamic3d", robot="sshape")
-    esc = replace(ESCAPE_DEFAULTS["sshape"], tries=6)
+    esc = replace(ESCAPE_DEFAULTS["sshape"], tries=6, lookahead=0)
     planner = PolicyPlanner(shipped_checkpoint("sshape", "local"), escape=esc)
     eng = planner.engine
     probs = sc.problems("val", 4, seed=0)
@@ -170,4 +173,92 @@ def test_screened_escape_in_lockstep_among_moving_obstacles() -> None:
     assert np.all(sp.pending_checks[escaping] > 0) and np.all(sp.pending_checks[~escaping] == 0)
     for p in probs:
         res = planner.plan(p)
+        assert bool(check_path(sc.robot, p, res.path)) == res.success
+
+
+def test_escape_lookahead_takes_the_draw_the_mean_action_carries_furthest() -> None:
+    """With a lookahead, an escape step takes the draw from whose free end the mean action
+    carries the robot furthest: recomputed here from the same draws, every move walked by
+    ``q_free`` and every observation made at the pose it is from. A compiled rollout hands
+    such an escape to the step loop, and gives the same plan as the step loop alone."""
+    from dataclasses import replace
+
+    from pointplan.envs.core import q_free
+    from pointplan.evaluation.evaluate import check_path
+    from pointplan.planners.rollout import _OneRobot
+
+    with pytest.raises(ValueError, match="lookahead"):
+        Escape(lookahead=-1)
+    assert not Escape(tries=1, lookahead=3).stepped and Escape(tries=4, lookahead=3).stepped
+    sc = make_scenario("boxes3d", robot="sshape")
+    esc = replace(ESCAPE_DEFAULTS["sshape"], tries=5, lookahead=2)
+    planner = PolicyPlanner(shipped_checkpoint("sshape", "local"), escape=esc)
+    eng = planner.engine
+    p = sc.problem("val", 1, seed=0)
+    goal, scene = np.asarray(p.goal, np.float64), p.scene
+    sp = _OneRobot(eng, p, np.random.default_rng(5), sampled=False)
+    u = eng._uniforms(10_000)[: eng.observer.draws_one()]
+    q = np.asarray(p.start, np.float64)
+    obs = eng.observer.observe_one(q, u=u)
+    chosen = sp._furthest(obs, q, goal)
+
+    def walk(q0: np.ndarray, a: np.ndarray) -> np.ndarray:
+        tw = np.clip(np.asarray(a, np.float64), -1, 1) * np.asarray(sc.robot.action_scale)
+        return q_free(sc.robot, scene.world, q0[None], tw[None], scene.low[None], scene.high[None], eng.env.substep)[0][
+            0
+        ]
+
+    again, scores, own, acts = np.random.default_rng(5), [], [], []
+    for _ in range(5):
+        a = eng._act(obs, q, goal, esc.noise * again.standard_normal(eng.action_dim))
+        qk = walk(q, a)
+        own.append(float(np.asarray(sc.robot.distance(qk[None], q[None]))[0]))
+        for _ in range(2):
+            qk = walk(qk, eng._act(eng.observer.observe_one(qk, u=u), qk, goal, None))
+        scores.append(float(np.asarray(sc.robot.distance(qk[None], q[None]))[0]))
+        acts.append(a)
+    assert np.allclose(chosen, acts[int(np.argmax(scores))])
+    assert np.argmax(own) != np.argmax(scores)  # here the lookahead, not the draw's own motion, decides
+    compiled, plain = planner, PolicyPlanner(shipped_checkpoint("sshape", "local"), escape=esc, compiled=False)
+    assert compiled.engine.compiled_rays() is not None
+    same = escaped = 0
+    probs = sc.problems("val", 12, seed=0)
+    for prob in probs:
+        a, b = compiled.plan(prob), plain.plan(prob)
+        escaped += a.info.get("escapes", 0) > 0
+        same += a.path.shape == b.path.shape and np.allclose(a.path, b.path, atol=1e-5, rtol=0)
+        assert a.success == bool(check_path(sc.robot, prob, a.path))
+    assert escaped > 0 and same >= len(probs) - 1
+
+
+def test_escape_lookahead_in_lockstep() -> None:
+    """The batched stepper looks ahead too (observing each draw's lookahead through the
+    batched observer, among the obstacles as they are at the step's start): an escaping
+    robot's choice changes with it, the others keep their first draw, its checks are
+    counted, and the plans through moving obstacles stay certified."""
+    from dataclasses import replace
+
+    from pointplan.evaluation.evaluate import check_path
+    from pointplan.planners.rollout import _Lockstep
+
+    sc = make_scenario("dynamic3d", robot="sshape")
+    plain = replace(ESCAPE_DEFAULTS["sshape"], tries=6, lookahead=0)
+    ahead = replace(plain, lookahead=3)
+    eng = PolicyPlanner(shipped_checkpoint("sshape", "local"), escape=ahead).engine
+    probs = sc.problems("val", 6, seed=0)
+    escaping = np.array([True, False, True, True, False, True])
+    chosen = {}
+    for esc in (plain, ahead):
+        sp = _Lockstep(eng.act, sc.robot, eng.env, probs, np.random.default_rng(0), np.random.default_rng(1), 0.0, esc)
+        obs = sp.core.observe(np.random.default_rng(2))["observation"]
+        target = sp.core.goal.copy()
+        first = np.asarray(eng.act(obs, sp.core.q.copy(), target.copy(), noise=2.0 * np.ones((6, 6))), np.float32)
+        chosen[esc.lookahead] = sp._furthest(obs, target, escaping, first.copy())
+        np.testing.assert_array_equal(chosen[esc.lookahead][~escaping], first[~escaping])
+        assert np.all(sp.pending_checks[~escaping] == 0)
+        if esc.lookahead:
+            assert np.all(sp.pending_checks[escaping] > 6 * 3)  # the lookahead's moves are checked and counted
+    assert not np.allclose(chosen[0][escaping], chosen[3][escaping])
+    planner = PolicyPlanner(shipped_checkpoint("sshape", "local"), escape=ahead)
+    for p, res in zip(probs, planner.engine.run(probs)):
         assert bool(check_path(sc.robot, p, res.path)) == res.success

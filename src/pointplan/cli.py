@@ -251,8 +251,9 @@ def _check_checkpoint(args: argparse.Namespace, names: Sequence[str]) -> None:
         raise CLIError(f"--attempts is for --planner policy or hybrid, not {', '.join(names)}")
     if getattr(args, "escape", None) is not None and not any(n.lower() in POLICY_PLANNERS for n in names):
         raise CLIError(f"--escape is for --planner policy or hybrid, not {', '.join(names)}")
-    if getattr(args, "escape_tries", None) is not None and not any(n.lower() in POLICY_PLANNERS for n in names):
-        raise CLIError(f"--escape-tries is for --planner policy or hybrid, not {', '.join(names)}")
+    for flag in ("escape_tries", "escape_lookahead"):
+        if getattr(args, flag, None) is not None and not any(n.lower() in POLICY_PLANNERS for n in names):
+            raise CLIError(f"--{flag.replace('_', '-')} is for --planner policy or hybrid, not {', '.join(names)}")
     if getattr(args, "dodge", None) is not None and not any(n.lower() in POLICY_PLANNERS for n in names):
         raise CLIError(f"--dodge is for --planner policy or hybrid, not {', '.join(names)}")
     noise = getattr(args, "action_noise", 1.0)
@@ -329,10 +330,12 @@ def _planner(name: str, robot: Robot, args: argparse.Namespace, seed: int) -> Pl
             kwargs.update(attempts=args.attempts, action_noise=args.action_noise)
         if getattr(args, "escape", None) is not None:
             kwargs["escape"] = args.escape
-        if getattr(args, "escape_tries", None) is not None:
+        tries, ahead = getattr(args, "escape_tries", None), getattr(args, "escape_lookahead", None)
+        if tries is not None or ahead is not None:
             from .planners.rollout import RolloutOptions
 
-            kwargs["escape"] = RolloutOptions(escape=getattr(args, "escape", None)).escape_for(robot, args.escape_tries)
+            esc = RolloutOptions(escape=getattr(args, "escape", None)).escape_for(robot, tries)
+            kwargs["escape"] = esc if ahead is None else dataclasses.replace(esc, lookahead=ahead)
         if getattr(args, "dodge", None) is not None:
             from .planners.rollout import DODGE_DEFAULT
 
@@ -425,6 +428,11 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
         "--escape-tries",
         type=positive_int,
         help="--planner policy or hybrid: each sampled step of an escape draws this many actions and takes the one whose free motion goes furthest (default: the robot's, chosen on validation: 8 for the S-shape, 64 for the S-shape told its orientation; 1 is the plain escape)",
+    )
+    p.add_argument(
+        "--escape-lookahead",
+        type=non_negative_int,
+        help="--planner policy or hybrid: judge each draw of a screened escape by where the mean action carries the robot in this many steps more from its end, the furthest taken; 0: by its own motion (default: the robot's)",
     )
     p.add_argument(
         "--dodge",

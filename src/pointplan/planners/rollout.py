@@ -65,6 +65,8 @@ ActFn = Callable[..., np.ndarray]
 _F64 = np.dtype(np.float64)
 #: the resolution of every certified edge to the goal (as Bi-RRT checks its edges)
 GOAL_EDGE_RESOLUTION = 0.01
+#: a screened escape's draw that moves the robot less than this is not looked ahead from
+_MOVED = 1e-3
 
 
 @dataclass(frozen=True)
@@ -86,7 +88,12 @@ class Escape:
     ``tries``: each sampled step of an escape draws this many actions and takes the one
     whose free motion goes furthest (each draw's motion checked, and counted; among moving
     obstacles, against where they are at the step's start, not where they will be). One
-    draw is the plain escape."""
+    draw is the plain escape.
+
+    ``lookahead``: with several draws, each draw's free end is followed by the mean action
+    for this many steps more (observed there, each move as far as it is free), and the draw
+    whose lookahead ends furthest from where the robot is is taken (one whose lookahead
+    arrives at the goal first); 0: each draw's own motion decides."""
 
     steps: int = 10
     noise: float = 2.0
@@ -94,6 +101,7 @@ class Escape:
     window: int = 1
     subgoal: bool = False
     tries: int = 1
+    lookahead: int = 0
 
     def __post_init__(self) -> None:
         if int(self.steps) != self.steps or self.steps < 0:
@@ -106,13 +114,22 @@ class Escape:
             raise ValueError(f"escape window must be an integer >= 1, not {self.window}")
         if int(self.tries) != self.tries or self.tries < 1:
             raise ValueError(f"escape tries must be an integer >= 1, not {self.tries}")
+        if int(self.lookahead) != self.lookahead or self.lookahead < 0:
+            raise ValueError(f"escape lookahead must be an integer >= 0, not {self.lookahead}")
         object.__setattr__(self, "steps", int(self.steps))  # 6.0 -> 6: they index paths
         object.__setattr__(self, "tries", int(self.tries))
+        object.__setattr__(self, "lookahead", int(self.lookahead))
         object.__setattr__(self, "window", int(self.window))
 
     @property
     def on(self) -> bool:
         return self.steps > 0
+
+    @property
+    def stepped(self) -> bool:
+        """Whether its steps run in the step loop only (toward a subgoal, or looking
+        ahead): a compiled rollout hands over where one starts."""
+        return self.on and (self.subgoal or (self.lookahead > 0 and self.tries > 1))
 
 
 #: the escape a robot's policies plan with when none is given (by the robot's name, else
@@ -123,6 +140,9 @@ class Escape:
 #: 1 / 4 / 8; 64 draws gained 0.2-1.8 points on 500 for three times the time, so eight
 #: stay); the S-shape told its orientation, whose policy threads Slot's openings, takes 64
 #: (twice 500 validation problems of Slot: 90.8 and 92.4% with 8, 94.8 and 95.0% with 64);
+#: both S-shapes judge each draw by three steps of lookahead (500 validation problems of
+#: 3D-Boxes, twice: `local` 94.4 / 95.8 -> 97.4 / 97.0%, `global` 92.8 -> 97.0% once; Slot
+#: twice: 94.8 / 95.0 -> 95.8 / 96.6%; 3D-Dynamic, 200: 93.0 -> 95.5%, 88.5 -> 89.0%);
 #: the sphere dithers in one place, so six steps that
 #: end within 0.1 of where they started start ten toward a random subgoal; the Panda, like
 #: the S-shape, presses against what blocks it (its cloned policy on 40 validation cells of
@@ -131,8 +151,8 @@ class Escape:
 #: with one draw, 65.5% with eight); the UR5 takes the Panda's (its policy: 23.5 -> 34.0%).
 #: Robots not named here plan without.
 ESCAPE_DEFAULTS: dict[str, Escape] = {
-    "sshape": Escape(steps=10, noise=2.0, still=0.01, tries=8),
-    "sshape-oriented": Escape(steps=10, noise=2.0, still=0.01, tries=64),
+    "sshape": Escape(steps=10, noise=2.0, still=0.01, tries=8, lookahead=3),
+    "sshape-oriented": Escape(steps=10, noise=2.0, still=0.01, tries=64, lookahead=3),
     "panda": Escape(steps=10, noise=2.0, still=0.01, tries=8),
     "ur5": Escape(steps=10, noise=2.0, still=0.01, tries=8),
     "sphere3d": Escape(steps=10, noise=0.0, still=0.1, window=6, subgoal=True),
@@ -518,6 +538,7 @@ class _Lockstep(_Stepper):
         self._testers: dict[int, GoalTester] = {}
         self.moving = np.array([p.scene.dynamic for p in problems])
         self.dodge = dodge if self.moving.any() else DODGE_OFF
+        self.look_rng = np.random.default_rng(zlib.crc32(b"lookahead"))  # the lookahead's observations
 
     def actions(self, st: _State, t: int, escaping: np.ndarray, target: np.ndarray) -> np.ndarray:
         core = self.core
@@ -600,17 +621,38 @@ class _Lockstep(_Stepper):
         first), each takes the one whose free motion goes furthest."""
         q0 = self.core.q.copy()
         q1, n = self._free_move(a)
-        far = np.asarray(self.robot.distance(q1, q0))
-        self.pending_checks = np.where(escaping, n, 0)
+        far = self._score(q1, q0, target, escaping)
+        self.pending_checks = self.pending_checks + np.where(escaping, n, 0)
         for _ in range(self.esc.tries - 1):
             draw = self.esc.noise * self.nrng.standard_normal(a.shape)
             b = np.asarray(self.act(obs, q0.copy(), target.copy(), noise=draw), np.float32)
             q1, n = self._free_move(b)
-            d = np.asarray(self.robot.distance(q1, q0))
+            d = self._score(q1, q0, target, escaping)
             better = escaping & (d > far)
             a[better], far[better] = b[better], d[better]
             self.pending_checks = self.pending_checks + np.where(escaping, n, 0)
         return a
+
+    def _score(self, q1: np.ndarray, q0: np.ndarray, target: np.ndarray, escaping: np.ndarray) -> np.ndarray:
+        """How far each draw that ends at ``q1`` takes its robot from ``q0``: its own motion,
+        or with a lookahead (:class:`Escape`) where the mean action then carries it
+        (infinite where it arrives at ``target``; the escaping robots' checks counted)."""
+        core, robot = self.core, self.robot
+        d = np.asarray(robot.distance(q1, q0), np.float64)
+        look = escaping & (d >= _MOVED)
+        if not self.esc.lookahead or not look.any():
+            return d
+        qk, arrived, world = q1.copy(), np.zeros(len(q1), bool), core.world_at(core.t)
+        clip = core.config.bounds == "clip"
+        for _ in range(self.esc.lookahead):
+            obs = core.observer.observe(qk, self.look_rng, core.t)
+            a = np.asarray(self.act(obs, qk.copy(), target.copy()), np.float64)
+            tw = np.clip(a, -1.0, 1.0) * robot.action_scale
+            qk, _, n = q_free(robot, world, qk, tw, core.low, core.high, core.config.substep, clip_target=clip)
+            self.pending_checks = self.pending_checks + np.where(look, n, 0)
+            arrived |= goal_reached(robot, core.config, qk, target, np.zeros(len(qk), bool))
+        ahead = np.where(arrived, np.inf, np.asarray(robot.distance(qk, q0), np.float64))
+        return np.where(look, ahead, d)
 
     def move(self, a: np.ndarray, st: _State) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         _, term, _, info = self.core.step(a)
@@ -735,20 +777,37 @@ class _OneRobot(_Stepper):
 
     def _furthest(self, obs: np.ndarray, q: np.ndarray, target: np.ndarray) -> np.ndarray:
         """The screened escape's step: of ``tries`` sampled actions, the one whose free
-        motion from ``q`` goes furthest (its motion checks are counted with the step's)."""
+        motion from ``q`` goes furthest, or whose lookahead does (:class:`Escape`); the
+        motion checks are counted with the step's."""
         eng = self.engine
         tc = time.perf_counter()
-        best, far = None, -1.0
+        best, far = None, -np.inf
         for _ in range(eng.escape.tries):
             a = eng._act(obs, q, target, self._noise(True))
             q1, _, n = self._free_move(q[None], np.asarray(a, np.float32)[None])
             self.pending_checks += int(np.sum(n))
             d = float(np.asarray(self.robot.distance(q1, q[None]))[0])
+            if eng.escape.lookahead and d >= _MOVED:
+                d = self._ahead(q1[0], q, target)
             if d > far:
                 best, far = a, d
         self.timing.motion += time.perf_counter() - tc
         assert best is not None
         return best
+
+    def _ahead(self, q1: np.ndarray, q: np.ndarray, target: np.ndarray) -> float:
+        """How far from ``q`` the mean action carries the robot in the escape's lookahead
+        from ``q1`` (infinite where it arrives at ``target``)."""
+        eng, observer = self.engine, self.observer
+        u = eng._uniforms(observer.draws_one())[: observer.draws_one()]
+        qk = q1[None]
+        for _ in range(eng.escape.lookahead):
+            a = eng._act(observer.observe_one(qk[0], u=u), qk[0], target, None)
+            qk, _, n = self._free_move(qk, np.asarray(a, np.float32)[None])
+            self.pending_checks += int(np.sum(n))
+            if goal_reached(self.robot, eng.env, qk, target[None], np.zeros(1, bool))[0]:
+                return np.inf
+        return float(np.asarray(self.robot.distance(qk, q[None]))[0])
 
     def move(self, a: np.ndarray, st: _State) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         tc = time.perf_counter()
