@@ -126,13 +126,14 @@ def table(robot: str) -> str:
 
     def order(
         name: str,
-    ) -> tuple[str, int, int, int, int]:  # policy-OBS[-escK[tN]|-subK][-dodgeD][-xK]
+    ) -> tuple[str, int, int, int, int, int]:  # policy-OBS[-escK[tN[lL]]|-subK][-dodgeD][-xK]
         parts = name.split("-")[2:]
         kind = next((p[3:] for p in parts if p.startswith(("esc", "sub"))), "0")
         esc, _, tries = kind.partition("t")
+        tries, _, ahead = tries.partition("l")
         dodge = next((int(p[5:]) for p in parts if p.startswith("dodge")), 0)
         att = next((int(p[1:]) for p in parts if p.startswith("x")), 1)
-        return name.split("-")[1], int(esc), int(tries or 1), dodge, att
+        return name.split("-")[1], int(esc), int(tries or 1), int(ahead or 0), dodge, att
 
     base = ("policy-global", "policy-local")
     tried = sorted({p.stem.split("_", 2)[2] for p in OUT.glob(f"{robot}_*_policy-*.json")} - set(base), key=order)
