@@ -59,6 +59,8 @@ _GRID_SLACK = 1e-9
 _IN_BOUNDS_EPS = 1e-9
 #: the rollout stopped within the goal tolerance exactly at the goal (nothing to connect)
 END_AT_GOAL = 7
+#: as ``rollout._MOVED``: a screened escape's draw that moves less is not looked ahead from
+_MOVED = 1e-3
 
 #: ``fparams`` of :func:`rollout_rigid`
 (
@@ -90,7 +92,8 @@ END_AT_GOAL = 7
     I_HANDOVER,
     I_OBS,
     I_TRIES,
-) = range(14)
+    I_LOOKAHEAD,
+) = range(15)
 #: ``I_ROBOT``: a translating ball, or a free-flying body of boxes
 BALL, BODY = 0, 1
 #: ``I_OBS``: what the robot sees: rays (``local``), or a subset of the scene's points (``global``)
@@ -419,15 +422,17 @@ def _finish(kind, end, path, t, goal, greedy, connect, resolution, low, high, ra
 
 @_jit
 def _furthest(  # type: ignore[no-untyped-def]
-    q, goal, u, noise, normals, drawn, sd, rays, rboxes, pts, nrm, low, high, boxes, body, fparams, iparams, scale,
+    q, goal, u, u0, noise, normals, drawn, sd, rays, rboxes, pts, nrm, low, high, boxes, body, fparams, iparams, scale,
     wflat, layout, ows, nws, ws, tw, cand, tmp, best,
 ):  # fmt: skip
     """The screened escape's step: ``I_TRIES`` actions drawn from ``normals`` (from row
     ``drawn``, scaled by ``sd``), each moved from ``q`` into ``cand`` as far as it is
-    free; the one that went furthest is left in ``best`` (the first of equals). Returns the
-    motion checks of all the draws and the next row of ``normals``."""
+    free, then (``I_LOOKAHEAD`` steps) followed by the mean action (:func:`_ahead`); the
+    one that went furthest is left in ``best`` (the first of equals). Returns the motion
+    checks of all the draws and the next row of ``normals``."""
     kind, adim, radius = iparams[I_ROBOT], iparams[I_ACTION_DIM], fparams[F_RADIUS]
     far, checks = -1.0, 0
+    drew = np.empty(adim, np.float32)
     for _ in range(iparams[I_TRIES]):
         for i in range(adim):
             noise[i] = np.float32(sd * normals[drawn, i])
@@ -436,17 +441,70 @@ def _furthest(  # type: ignore[no-untyped-def]
             q, goal, u, noise, True, rays, rboxes, pts, nrm, low, high, fparams, iparams, scale, wflat, layout, ows, nws
         )
         for i in range(adim):
+            drew[i] = a[i]  # (``a`` is the network's scratch, which the lookahead reuses)
             tw[i] = np.float64(min(max(a[i], np.float32(-1.0)), np.float32(1.0))) * scale[i]
         _, c = _r_move(
             kind, q, tw, fparams[F_SUBSTEP], iparams[I_CLIP] != 0, low, high, radius, body, boxes, ws, cand, scale
         )
         checks += c
         d = _r_distance(kind, cand, q, tmp)
+        if iparams[I_LOOKAHEAD] > 0 and d >= _MOVED:
+            d, c = _ahead(
+                q, cand, goal, u0, noise, rays, rboxes, pts, nrm, low, high, boxes, body, fparams, iparams, scale,
+                wflat, layout, ows, nws, ws, tw, tmp,
+            )  # fmt: skip
+            checks += c
         if d > far:
             far = d
             for i in range(adim):
-                best[i] = a[i]
+                best[i] = drew[i]
     return checks, drawn
+
+
+@_jit
+def _ahead(  # type: ignore[no-untyped-def]
+    q, q1, goal, u0, noise, rays, rboxes, pts, nrm, low, high, boxes, body, fparams, iparams, scale, wflat, layout,
+    ows, nws, ws, tw, tmp,
+):  # fmt: skip
+    """The escape's lookahead from a draw's free end ``q1``: ``I_LOOKAHEAD`` steps of the
+    mean action, observed from the draws ``u0`` (the stream's first block, as the step loop
+    does), each moved as far as it is free. Returns how far from ``q`` it ended (infinite
+    where it came within the goal tolerance) and its motion checks."""
+    kind, adim, radius = iparams[I_ROBOT], iparams[I_ACTION_DIM], fparams[F_RADIUS]
+    qk, qn = q1.copy(), np.empty_like(q1)
+    checks = 0
+    for _ in range(iparams[I_LOOKAHEAD]):
+        a = _act(
+            qk,
+            goal,
+            u0,
+            noise,
+            False,
+            rays,
+            rboxes,
+            pts,
+            nrm,
+            low,
+            high,
+            fparams,
+            iparams,
+            scale,
+            wflat,
+            layout,
+            ows,
+            nws,
+        )
+        for i in range(adim):
+            tw[i] = np.float64(min(max(a[i], np.float32(-1.0)), np.float32(1.0))) * scale[i]
+        _, c = _r_move(
+            kind, qk, tw, fparams[F_SUBSTEP], iparams[I_CLIP] != 0, low, high, radius, body, boxes, ws, qn, scale
+        )
+        checks += c
+        for i in range(qk.shape[0]):
+            qk[i] = qn[i]
+        if _r_distance(kind, qk, goal, tmp) < fparams[F_GOAL_TOL]:
+            return np.inf, checks
+    return _r_distance(kind, qk, q, tmp), checks
 
 
 @_jit
@@ -523,8 +581,8 @@ def rollout_rigid(  # type: ignore[no-untyped-def]
         u = stream[t * blk : (t + 1) * blk]
         if escaping and iparams[I_TRIES] > 1:
             c, drawn = _furthest(
-                q, goal, u, noise, normals, drawn, fparams[F_ESC_NOISE], rays, rboxes, pts, nrm, low, high, boxes, body,
-                fparams, iparams, scale, wflat, layout, ows, nws, ws, tw, path[t + 1], tmp, best,
+                q, goal, u, stream[:blk], noise, normals, drawn, fparams[F_ESC_NOISE], rays, rboxes, pts, nrm, low, high,
+                boxes, body, fparams, iparams, scale, wflat, layout, ows, nws, ws, tw, path[t + 1], tmp, best,
             )  # fmt: skip
             checks += c
         else:

@@ -125,12 +125,6 @@ class Escape:
     def on(self) -> bool:
         return self.steps > 0
 
-    @property
-    def stepped(self) -> bool:
-        """Whether its steps run in the step loop only (toward a subgoal, or looking
-        ahead): a compiled rollout hands over where one starts."""
-        return self.on and (self.subgoal or (self.lookahead > 0 and self.tries > 1))
-
 
 #: the escape a robot's policies plan with when none is given (by the robot's name, else
 #: its body's), chosen on validation problems (docs: "Escaping a stall"): the S-shape

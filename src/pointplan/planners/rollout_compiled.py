@@ -225,8 +225,8 @@ class CompiledRays:
     boxes (the S-shape) seeing rays (:class:`~pointplan.observers.rays.LocalRays`), or the
     S-shape seeing a subset of the scene's points (``global``): one call per attempt, in
     scenes of boxes, the same rollout as the one-robot step loop's. The mean action with its escape,
-    or a sampled attempt; an escape toward a subgoal (the sphere's) or one that looks ahead
-    is left to the step loop, which goes on from where it starts. Made by :meth:`build`."""
+    or a sampled attempt; an escape toward a subgoal (the sphere's) is left to the step
+    loop, which goes on from where it starts. Made by :meth:`build`."""
 
     def __init__(
         self, engine: EngineView, kind: int, body: tuple[np.ndarray, ...], rays: tuple[np.ndarray, ...] | None
@@ -332,7 +332,7 @@ class CompiledRays:
             observer.spacing,
             float(getattr(eng.robot, "radius", 0.0)),
         )
-        iparams = np.zeros(14, np.int64)
+        iparams = np.zeros(15, np.int64)
         iparams[:] = (
             eng.horizon,
             int(opts.stall_steps or 0),
@@ -345,9 +345,10 @@ class CompiledRays:
             esc.steps if esc.on else 0,
             int(sampled),
             self.kind,
-            int(esc.stepped),  # an escape toward a subgoal or looking ahead: the step loop's
+            int(esc.on and esc.subgoal),  # an escape toward a subgoal: the step loop's
             self.sees,
             esc.tries,
+            esc.lookahead,
         )
         return fparams, iparams
 
@@ -356,12 +357,11 @@ class CompiledRays:
     ) -> tuple[PlanResult | None, tuple[np.ndarray, int] | None, float | None]:
         """One attempt of ``RolloutEngine.plan`` (the mean action with the escape drawn
         from ``nrng``, or with ``sampled`` every action drawn from it): ``(result, None,
-        None)``; ``(None, (path, checks), seconds)`` where an escape the step loop runs
-        (:attr:`Escape.stepped`) starts, and it goes on from there; ``(None, None, None)``
-        where it does not apply (a scene not of boxes only; a sampled attempt with such
-        escapes)."""
+        None)``; ``(None, (path, checks), seconds)`` where an escape toward a subgoal
+        starts (the step loop goes on from there); ``(None, None, None)`` where it does
+        not apply (a scene not of boxes only; a sampled attempt with subgoal escapes)."""
         esc = self.engine.escape
-        if sampled and esc.stepped:
+        if sampled and esc.on and esc.subgoal:
             return None, None, None
         scene = problem.scene
         if scene is not self._scene:
@@ -373,7 +373,7 @@ class CompiledRays:
         eng = self.engine
         horizon, adim = eng.horizon, eng.robot.twist_dim
         # the sampled steps' normal draws, in the order the step loop takes them
-        noisy = sampled or (esc.on and not esc.stepped)
+        noisy = sampled or (esc.on and not esc.subgoal)
         # (a screened escape takes ``tries`` rows a step)
         normals = nrng.standard_normal((horizon * max(1, esc.tries), adim)) if noisy else np.zeros((0, adim))
         fparams, iparams = self._params(sampled)
