@@ -48,6 +48,12 @@ def main() -> None:
         default=None,
         help="draws per escape step, the furthest free motion taken (default: the robot's; 1: the plain escape)",
     )
+    ap.add_argument(
+        "--escape-lookahead",
+        type=int,
+        default=None,
+        help="steps of the mean action judging each escape draw (default: the robot's; 0: the draw's own motion)",
+    )
     ap.add_argument("--json", help="write the rows here")
     args = ap.parse_args()
     if any(k < 1 for k in args.attempts):
@@ -63,10 +69,14 @@ def main() -> None:
     scenario = make_scenario(args.env or policy.env, robot=policy.robot.name)
     problems = scenario.problems(args.split, args.episodes, seed=args.seed)
     escape: object = args.escape
-    if args.escape_tries is not None:
+    if args.escape_tries is not None or args.escape_lookahead is not None:
+        from dataclasses import replace
+
         from pointplan.planners.rollout import RolloutOptions
 
         escape = RolloutOptions(escape=args.escape).escape_for(scenario.robot, args.escape_tries)
+        if args.escape_lookahead is not None:
+            escape = replace(escape, lookahead=args.escape_lookahead)
     rows = []
     for k in args.attempts:
         planner = PolicyPlanner(policy, robot=scenario.robot, attempts=k, action_noise=args.action_noise, escape=escape)
@@ -106,6 +116,7 @@ def main() -> None:
                     "checkpoint": ckpt,
                     "escape": args.escape,
                     "escape_tries": args.escape_tries,
+                    "escape_lookahead": args.escape_lookahead,
                     "split": args.split,
                     "episodes": args.episodes,
                     "action_noise": args.action_noise,
