@@ -475,25 +475,8 @@ def _ahead(  # type: ignore[no-untyped-def]
     checks = 0
     for _ in range(iparams[I_LOOKAHEAD]):
         a = _act(
-            qk,
-            goal,
-            u0,
-            noise,
-            False,
-            rays,
-            rboxes,
-            pts,
-            nrm,
-            low,
-            high,
-            fparams,
-            iparams,
-            scale,
-            wflat,
-            layout,
-            ows,
-            nws,
-        )
+            qk, goal, u0, noise, False, rays, rboxes, pts, nrm, low, high, fparams, iparams, scale, wflat, layout, ows, nws
+        )  # fmt: skip
         for i in range(adim):
             tw[i] = np.float64(min(max(a[i], np.float32(-1.0)), np.float32(1.0))) * scale[i]
         _, c = _r_move(

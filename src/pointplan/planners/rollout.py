@@ -592,16 +592,16 @@ class _Lockstep(_Stepper):
         self.pending_checks = self.pending_checks + checks
         return a
 
-    def _free_move(self, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Where actions ``a`` would take the robots, as far as each is free among the
-        obstacles as they are now (what the robot's sensors show: no look at where
-        moving ones will be); the motion checks of each."""
+    def _free_move(self, a: np.ndarray, q: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Where actions ``a`` would take the robots from ``q`` (default: where they are),
+        as far as each is free among the obstacles as they are now (what the robot's
+        sensors show: no look at where moving ones will be); the motion checks of each."""
         core = self.core
         tw = np.clip(a.astype(np.float64), -1.0, 1.0) * self.robot.action_scale
         q1, _, n = q_free(
             self.robot,
             core.world_at(core.t),
-            core.q,
+            core.q if q is None else q,
             tw,
             core.low,
             core.high,
@@ -636,13 +636,10 @@ class _Lockstep(_Stepper):
         look = escaping & (d >= _MOVED)
         if not self.esc.lookahead or not look.any():
             return d
-        qk, arrived, world = q1.copy(), np.zeros(len(q1), bool), core.world_at(core.t)
-        clip = core.config.bounds == "clip"
+        qk, arrived = q1.copy(), np.zeros(len(q1), bool)
         for _ in range(self.esc.lookahead):
             obs = core.observer.observe(qk, self.look_rng, core.t)
-            a = np.asarray(self.act(obs, qk.copy(), target.copy()), np.float64)
-            tw = np.clip(a, -1.0, 1.0) * robot.action_scale
-            qk, _, n = q_free(robot, world, qk, tw, core.low, core.high, core.config.substep, clip_target=clip)
+            qk, n = self._free_move(np.asarray(self.act(obs, qk.copy(), target.copy())), qk)
             self.pending_checks = self.pending_checks + np.where(look, n, 0)
             arrived |= goal_reached(robot, core.config, qk, target, np.zeros(len(qk), bool))
         ahead = np.where(arrived, np.inf, np.asarray(robot.distance(qk, q0), np.float64))
