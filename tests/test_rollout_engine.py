@@ -263,3 +263,34 @@ def test_escape_lookahead_in_lockstep() -> None:
     planner = PolicyPlanner(shipped_checkpoint("sshape", "local"), escape=ahead)
     for p, res in zip(probs, planner.engine.run(probs)):
         assert bool(check_path(sc.robot, p, res.path)) == res.success
+
+
+def test_lockstep_escape_draws_for_the_escaping_robots_alone() -> None:
+    """The batched stepper's screened escape works on its escaping robots apart from the
+    batch: the same choices and the same counted checks as a batch of those problems
+    alone, all escaping, from the same observations and random streams (moving obstacles,
+    robots at different time steps)."""
+    from dataclasses import replace
+
+    from pointplan.planners.rollout import _Lockstep
+
+    sc = make_scenario("dynamic3d", robot="sshape")
+    esc = replace(ESCAPE_DEFAULTS["sshape"], tries=5, lookahead=2)
+    eng = PolicyPlanner(shipped_checkpoint("sshape", "local"), escape=esc).engine
+    probs = sc.problems("val", 5, seed=0)
+    escaping = np.array([False, True, False, True, True])
+    steppers = {}
+    for name, batch in (("all", probs), ("alone", [p for p, e in zip(probs, escaping) if e])):
+        sp = _Lockstep(eng.act, sc.robot, eng.env, batch, np.random.default_rng(0), np.random.default_rng(1), 0.0, esc)
+        sp.core.t[:] = np.arange(len(batch)) * 3 if name == "all" else np.flatnonzero(escaping) * 3
+        steppers[name] = sp
+    obs = steppers["all"].core.observe(np.random.default_rng(2))["observation"]
+    target = steppers["all"].core.goal.copy()
+    first = np.asarray(eng.act(obs, steppers["all"].core.q.copy(), target.copy()), np.float32)
+    chosen = steppers["all"]._furthest(obs, target, escaping, first.copy())
+    alone = steppers["alone"]._furthest(obs[escaping], target[escaping], np.ones(3, bool), first[escaping].copy())
+    np.testing.assert_array_equal(chosen[escaping], alone)
+    np.testing.assert_array_equal(chosen[~escaping], first[~escaping])
+    np.testing.assert_array_equal(steppers["all"].pending_checks[escaping], steppers["alone"].pending_checks)
+    assert np.all(steppers["all"].pending_checks[~escaping] == 0) and np.all(steppers["alone"].pending_checks > 0)
+    assert not np.array_equal(chosen[escaping], first[escaping])  # the escape chose other draws

@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..geometry.collision import CollisionWorld
 from ..observers import make_observer
+from ..observers.base import Observer
 from ..robots.base import Robot
 from ..robots.motion import intervals
 from ..scenes.scenarios import Scenario
@@ -151,6 +152,7 @@ class BatchedCore:
             kwargs["n_points"] = config.n_points
         self.observer = make_observer(observation, self.robot, **kwargs)
         self.observation = observation
+        self._observer_kwargs = kwargs
         e, c = self.num_envs, self.robot.config_dim
         self.q = np.zeros((e, c))
         self.goal = np.zeros((e, c))
@@ -208,6 +210,19 @@ class BatchedCore:
         if len(scenes) != self.num_envs:
             raise RuntimeError("reset every environment before stepping")
         return CollisionWorld.stack([s.world_at(int(ti)) for s, ti in zip(scenes, t)])
+
+    def rows(self, idx: Sequence[int] | NDArray[np.int64], t: NDArray[np.int64]) -> tuple[Observer, CollisionWorld]:
+        """A fresh observer of this core's kind bound to the scenes of environments ``idx``
+        alone, and their obstacles at times ``t`` (one per environment of ``idx``): a few
+        environments observed and moved apart from the batch (the scenes keep their point
+        sets and obstacle worlds cached, so this is cheap)."""
+        scenes = [s for s in (self.scenes[int(i)] for i in idx) if s is not None]
+        if len(scenes) != len(idx):
+            raise RuntimeError("reset every environment before stepping")
+        observer = make_observer(self.observation, self.robot, **self._observer_kwargs)
+        observer.bind(scenes)
+        world = CollisionWorld.stack([s.world_at(int(ti)) for s, ti in zip(scenes, t)])
+        return observer, world
 
     # ------------------------------------------------------------------ step
     def observe(self, rng: np.random.Generator) -> dict[str, NDArray[np.float32]]:

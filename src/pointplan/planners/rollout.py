@@ -505,6 +505,21 @@ def _results(
 
 
 # ---------------------------------------------------------------- steppers
+class _Rows:
+    """A few environments of a lockstep batch taken apart (the screened escape's robots):
+    their own observer and their obstacles as they are at their time steps, their bounds,
+    and the motion checks made for them."""
+
+    def __init__(self, core: BatchedCore, idx: np.ndarray) -> None:
+        self.core, self.idx, self.t = core, idx, core.t[idx].copy()
+        self.observer, self.world = core.rows(idx, self.t)
+        self.checks: Any = 0
+
+    def bounds(self) -> tuple[CollisionWorld, np.ndarray, np.ndarray]:
+        """Their obstacles and workspace bounds, for ``q_free``."""
+        return self.world, self.core.low[self.idx], self.core.high[self.idx]
+
+
 class _Lockstep(_Stepper):
     """Problems in lockstep through the batched environment core; ``act(obs, q, goal)``
     (with ``noise=`` when actions are sampled). The observations are drawn from ``rng``;
@@ -592,19 +607,23 @@ class _Lockstep(_Stepper):
         self.pending_checks = self.pending_checks + checks
         return a
 
-    def _free_move(self, a: np.ndarray, q: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def _free_move(
+        self, a: np.ndarray, q: np.ndarray | None = None, rows: _Rows | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Where actions ``a`` would take the robots from ``q`` (default: where they are),
         as far as each is free among the obstacles as they are now (what the robot's
-        sensors show: no look at where moving ones will be); the motion checks of each."""
+        sensors show: no look at where moving ones will be); the motion checks of each.
+        With ``rows``, ``a`` and ``q`` are those environments' alone."""
         core = self.core
         tw = np.clip(a.astype(np.float64), -1.0, 1.0) * self.robot.action_scale
+        world, low, high = (core.world_at(core.t), core.low, core.high) if rows is None else rows.bounds()
         q1, _, n = q_free(
             self.robot,
-            core.world_at(core.t),
+            world,
             core.q if q is None else q,
             tw,
-            core.low,
-            core.high,
+            low,
+            high,
             core.config.substep,
             clip_target=core.config.bounds == "clip",
         )
@@ -612,36 +631,46 @@ class _Lockstep(_Stepper):
 
     def _furthest(self, obs: np.ndarray, target: np.ndarray, escaping: np.ndarray, a: np.ndarray) -> np.ndarray:
         """The screened escape for the robots ``escaping``: of ``tries`` draws (``a`` the
-        first), each takes the one whose free motion goes furthest."""
-        q0 = self.core.q.copy()
-        q1, n = self._free_move(a)
-        far = self._score(q1, q0, target, escaping)
-        self.pending_checks = self.pending_checks + np.where(escaping, n, 0)
+        first), each takes the one whose free motion goes furthest. Only the escaping
+        environments are drawn for, moved and observed (apart from the batch)."""
+        idx = np.flatnonzero(escaping)
+        if len(idx) == 0:
+            return a
+        rows = _Rows(self.core, idx)
+        q0, tg, ob = self.core.q[idx].copy(), target[idx].copy(), obs[idx]
+        best = a[idx].copy()
+        q1, checks = self._free_move(best, q0, rows)
+        far = self._score(q1, q0, tg, rows)
         for _ in range(self.esc.tries - 1):
-            draw = self.esc.noise * self.nrng.standard_normal(a.shape)
-            b = np.asarray(self.act(obs, q0.copy(), target.copy(), noise=draw), np.float32)
-            q1, n = self._free_move(b)
-            d = self._score(q1, q0, target, escaping)
-            better = escaping & (d > far)
-            a[better], far[better] = b[better], d[better]
-            self.pending_checks = self.pending_checks + np.where(escaping, n, 0)
+            draw = self.esc.noise * self.nrng.standard_normal(best.shape)
+            b = np.asarray(self.act(ob, q0.copy(), tg.copy(), noise=draw), np.float32)
+            q1, n = self._free_move(b, q0, rows)
+            d = self._score(q1, q0, tg, rows)
+            better = d > far
+            best[better], far[better] = b[better], d[better]
+            checks = checks + n
+        a[idx] = best
+        counted = np.zeros(len(a), np.int64)
+        counted[idx] = checks + rows.checks
+        self.pending_checks = self.pending_checks + counted
         return a
 
-    def _score(self, q1: np.ndarray, q0: np.ndarray, target: np.ndarray, escaping: np.ndarray) -> np.ndarray:
-        """How far each draw that ends at ``q1`` takes its robot from ``q0``: its own motion,
-        or with a lookahead (:class:`Escape`) where the mean action then carries it
-        (infinite where it arrives at ``target``; the escaping robots' checks counted)."""
-        core, robot = self.core, self.robot
+    def _score(self, q1: np.ndarray, q0: np.ndarray, target: np.ndarray, rows: _Rows) -> np.ndarray:
+        """How far each draw that ends at ``q1`` takes its robot from ``q0`` (the
+        environments ``rows``): its own motion, or with a lookahead (:class:`Escape`) where
+        the mean action then carries it (infinite where it arrives at ``target``; the
+        lookahead's checks added to ``rows.checks``)."""
+        robot = self.robot
         d = np.asarray(robot.distance(q1, q0), np.float64)
-        look = escaping & (d >= _MOVED)
+        look = d >= _MOVED
         if not self.esc.lookahead or not look.any():
             return d
         qk, arrived = q1.copy(), np.zeros(len(q1), bool)
         for _ in range(self.esc.lookahead):
-            obs = core.observer.observe(qk, self.look_rng, core.t)
-            qk, n = self._free_move(np.asarray(self.act(obs, qk.copy(), target.copy())), qk)
-            self.pending_checks = self.pending_checks + np.where(look, n, 0)
-            arrived |= goal_reached(robot, core.config, qk, target, np.zeros(len(qk), bool))
+            obs = rows.observer.observe(qk, self.look_rng, rows.t)
+            qk, n = self._free_move(np.asarray(self.act(obs, qk.copy(), target.copy())), qk, rows)
+            rows.checks = rows.checks + np.where(look, n, 0)
+            arrived |= goal_reached(robot, self.core.config, qk, target, np.zeros(len(qk), bool))
         ahead = np.where(arrived, np.inf, np.asarray(robot.distance(qk, q0), np.float64))
         return np.where(look, ahead, d)
 
