@@ -9,7 +9,8 @@ rates highest (plus ``L`` times the normalised motion); ``mix`` / ``mixq`` half 
 of the draws uniform in the action box instead of from the policy, then the furthest;
 ``lookgoal:D`` / ``lookfar:D`` the mean action followed for ``D`` steps from each draw's
 free end (observed there, each step's motion free as far as it goes), then the draw whose
-lookahead ends nearest the goal / furthest from where the robot is (an arrival wins).
+lookahead ends nearest the goal / furthest from where the robot is (an arrival wins);
+``lookfarlow:D`` the same as ``lookfar:D`` with every second draw at a quarter of the noise.
 The rules other than ``far`` replace the one-robot stepper's selection for this run only
 (the compiled rollout is turned off so that every rule runs in the same Python loop):
 
@@ -69,6 +70,8 @@ def main() -> None:
             uniform = (rule == "mix" and k % 2 == 1) or (rule == "mixq" and k % 4 == 3)
             if uniform:
                 a = self.nrng.uniform(-1, 1, eng.action_dim).astype(np.float32)
+            elif rule == "lookfarlow" and k % 2 == 1:
+                a = eng._act(obs, q, target, 0.25 * self._noise(True))
             else:
                 a = eng._act(obs, q, target, self._noise(True))
             q1, _, n = self._free_move(q[None], np.asarray(a, np.float32)[None])
@@ -106,7 +109,7 @@ def main() -> None:
             qk = qn[0]
             if float(np.asarray(robot.distance(qk[None], target[None]))[0]) < 0.05:
                 return np.inf
-        if rule == "lookfar":
+        if rule in ("lookfar", "lookfarlow"):
             return float(np.asarray(robot.distance(qk[None], q0[None]))[0])
         return -float(np.asarray(robot.distance(qk[None], target[None]))[0])
 
