@@ -434,7 +434,7 @@ def _loop(sp: _Stepper, st: _State, horizon: int, opts: RolloutOptions, esc: Esc
         _try_goal(sp, st, st.active)
         if not st.active.any():
             break
-        escaping = st.left > 0
+        escaping = (st.left > 0) & st.active  # a rollout that ended mid-escape draws no more
         target = np.where(escaping[:, None], st.subgoals, st.goal) if toward_subgoal else st.goal
         a = sp.actions(st, t, escaping, target)
         st.left[escaping] -= 1
