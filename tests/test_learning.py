@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -766,3 +767,24 @@ def test_bc_uses_every_demonstration_of_an_existing_file_and_says_so(
     assert f"all its {n} demonstrations are used (--problems 2" in capsys.readouterr().out
     train_bc(BCConfig(n_problems=n, epochs=1, net=SMALL, demos_file=str(path)), tmp_path / "run2", progress=True)
     assert "demonstrations are used" not in capsys.readouterr().out
+
+
+def test_bc_init_actor_fine_tunes_the_given_actor(tmp_path: Path) -> None:
+    """``init_actor`` (``pointplan bc --init-actor``) starts cloning from that actor: with a
+    vanishing step size the result acts as it does, where a fresh start (another seed)
+    does not; a network that does not fit is refused with a clear error."""
+    demos = generate_demos(Narrow2DScenario(), 5, seed=0, progress=False)
+    train_bc(BCConfig(n_problems=5, epochs=2, net=SMALL, refresh_every=0), tmp_path / "a", progress=False, demos=demos)
+    start = str(tmp_path / "a" / "bc.pt")
+    tuned = BCConfig(n_problems=5, epochs=1, lr=1e-12, net=SMALL, seed=1, refresh_every=0, init_actor=start)
+    train_bc(tuned, tmp_path / "b", progress=False, demos=demos)
+    train_bc(replace(tuned, init_actor=None), tmp_path / "c", progress=False, demos=demos)
+    rng = np.random.default_rng(0)
+    obs = rng.normal(size=(9, 64, 4)).astype(np.float32)
+    q, g = rng.random((9, 2)), rng.random((9, 2))
+    a, b, c = (Policy.from_checkpoint(tmp_path / k / "bc.pt")(obs, q, g) for k in "abc")
+    np.testing.assert_allclose(b, a, atol=1e-6)
+    assert not np.allclose(c, a, atol=1e-3)
+    wider = replace(tuned, net=replace(SMALL, head_width=SMALL.head_width * 2))
+    with pytest.raises(ValueError, match="--init-actor .* its network is not this run's"):
+        train_bc(wider, tmp_path / "d", progress=False, demos=demos)

@@ -1089,6 +1089,7 @@ BC_OPTIONS = {
     "spread-weight": "bc.spread_weight",
     "workers": "bc.workers",
     "demos": "bc.demos_file",
+    "init-actor": "bc.init_actor",
     "rollouts": "rollouts",
     "labels-per-failure": "labels_per_failure",
     "epochs-per-round": "epochs_per_round",
@@ -1762,7 +1763,6 @@ def _add_bc_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
         default=0,
         help="DAgger rounds after cloning: the policy's failed rollouts labelled by Bi-RRT (default: 0, off)",
     )
-    p.add_argument("--init-actor", help="DAgger: start from this checkpoint's actor instead of cloning first")
     p.add_argument(
         "--resume",
         help="continue a cloning or DAgger run from its last.pt (DAgger: --dagger-rounds sets the new total); options given replace the run's own",

@@ -424,6 +424,9 @@ class BCConfig:
     #: Bi-RRT node budget of each demonstration (problems it cannot solve within it are
     #: left out: an arm's unsolvable problems cost seconds per thousand nodes)
     expert_max_nodes: int = field(default=20000, metadata={"min": 1})
+    #: start from this checkpoint's actor (its network must be this run's): cloning
+    #: fine-tunes it; with DAgger rounds, DAgger starts from it instead of cloning first
+    init_actor: str | None = None
 
 
 def train_bc(
@@ -449,6 +452,7 @@ def train_bc(
     env = EnvConfig(observation=cfg.observation, n_points=cfg.n_points)
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
+    start = _init_actor_state(cfg.init_actor, cfg.device) if ckpt is None and cfg.init_actor else None
     t0 = time.perf_counter()
     try:
         demos, demos_file = _bc_demos(cfg, scenario, folder, progress, demos, pool, state)
@@ -459,6 +463,8 @@ def train_bc(
     obs_shape = observation_shape(robot, env)
     actor = Actor(obs_shape, goal_dim(robot), robot.twist_dim, cfg.net).to(torch.device(cfg.device))
     opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr)
+    if start is not None:
+        _load_init_actor(actor, start, str(cfg.init_actor))
     losses, wall_before = _restore_bc(ckpt, actor, opt, rng) if ckpt is not None else ([], 0.0)
     if len(losses) >= cfg.epochs:
         raise ValueError(
@@ -606,6 +612,28 @@ def _bc_demos(
     path = cfg.demos_file or str(folder.path / "demos.npz")
     save_demos(path, scenario, demos, "train", cfg.seed)
     return demos, path
+
+
+def _init_actor_state(path: str, device: str) -> dict[str, Any]:
+    """The actor weights of checkpoint ``path`` (read before any demonstration is planned,
+    so that a wrong path fails at once)."""
+    from ..models.checkpoint import load_checkpoint
+
+    data = load_checkpoint(path, device)
+    if "actor" not in data:
+        raise ValueError(f"--init-actor {path}: the checkpoint has no actor")
+    return dict(data["actor"])
+
+
+def _load_init_actor(actor: Actor, state: dict[str, Any], path: str) -> None:
+    """Load ``state`` into ``actor``; a clear error where its network differs from this run's."""
+    try:
+        actor.load_state_dict(state)
+    except RuntimeError as e:
+        raise ValueError(
+            f"--init-actor {path}: its network is not this run's (give the same --observation, "
+            f"--n-points, --width, --layers, --encoder and --encoder-sharing): {str(e).splitlines()[0]}"
+        ) from None
 
 
 def _restore_bc(
