@@ -1121,7 +1121,12 @@ def cmd_bc(args: argparse.Namespace) -> int:
     pool = _demo_pool(cfg.bc.workers, cfg.bc.address)
     if (args.dagger_rounds or args.resume) and not cloning:
         summary = train_dagger(
-            cfg, run_dir, progress=not args.quiet, init_actor=args.init_actor, resume=args.resume, pool=pool
+            cfg,
+            run_dir,
+            progress=not args.quiet,
+            init_actor=getattr(args, "bc.init_actor", None),  # (as given here: a resumed run keeps its own weights)
+            resume=args.resume,
+            pool=pool,
         )
     elif cfg.expert != "birrt" and not cloning:
         summary = _bc_own_expert(cfg, run_dir, not args.quiet)
