@@ -151,7 +151,7 @@ def test_screened_escape_in_lockstep_among_moving_obstacles() -> None:
     from dataclasses import replace
 
     from pointplan.evaluation.evaluate import check_path
-    from pointplan.planners.rollout import _Lockstep
+    from pointplan.planners.rollout import _Lockstep, _Rows
 
     sc = make_scenario("dynamic3d", robot="sshape")
     esc = replace(ESCAPE_DEFAULTS["sshape"], tries=6, lookahead=0)
@@ -163,10 +163,10 @@ def test_screened_escape_in_lockstep_among_moving_obstacles() -> None:
     target = sp.core.goal.copy()
     first = np.asarray(eng.act(obs, sp.core.q.copy(), target.copy(), noise=esc.noise * np.ones((4, 6))), np.float32)
     escaping = np.array([True, False, True, False])
-    q0 = sp.core.q.copy()
-    before = np.asarray(sc.robot.distance(sp._free_move(first)[0], q0))
+    q0, every = sp.core.q.copy(), _Rows(sp.core, np.arange(4))
+    before = np.asarray(sc.robot.distance(sp._free_move(first, q0, every)[0], q0))
     chosen = sp._furthest(obs, target, escaping, first.copy())
-    after = np.asarray(sc.robot.distance(sp._free_move(chosen)[0], q0))
+    after = np.asarray(sc.robot.distance(sp._free_move(chosen, q0, every)[0], q0))
     assert np.all(after[escaping] >= before[escaping] - 1e-12)
     np.testing.assert_array_equal(chosen[~escaping], first[~escaping])
     assert np.all(sp.pending_checks[escaping] > 0) and np.all(sp.pending_checks[~escaping] == 0)

@@ -1124,7 +1124,7 @@ def cmd_bc(args: argparse.Namespace) -> int:
             cfg,
             run_dir,
             progress=not args.quiet,
-            init_actor=getattr(args, "bc.init_actor", None),  # (as given here: a resumed run keeps its own weights)
+            init_actor=given.get("bc.init_actor"),  # (as given here: a resumed run keeps its own weights)
             resume=args.resume,
             pool=pool,
         )

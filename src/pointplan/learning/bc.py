@@ -452,7 +452,7 @@ def train_bc(
     env = EnvConfig(observation=cfg.observation, n_points=cfg.n_points)
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
-    start = _init_actor_state(cfg.init_actor, cfg.device) if ckpt is None and cfg.init_actor else None
+    start = init_actor_state(cfg.init_actor, cfg.device) if ckpt is None and cfg.init_actor else None
     t0 = time.perf_counter()
     try:
         demos, demos_file = _bc_demos(cfg, scenario, folder, progress, demos, pool, state)
@@ -464,7 +464,7 @@ def train_bc(
     actor = Actor(obs_shape, goal_dim(robot), robot.twist_dim, cfg.net).to(torch.device(cfg.device))
     opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr)
     if start is not None:
-        _load_init_actor(actor, start, str(cfg.init_actor))
+        load_init_actor(actor, start, str(cfg.init_actor))
     losses, wall_before = _restore_bc(ckpt, actor, opt, rng) if ckpt is not None else ([], 0.0)
     if len(losses) >= cfg.epochs:
         raise ValueError(
@@ -614,7 +614,7 @@ def _bc_demos(
     return demos, path
 
 
-def _init_actor_state(path: str, device: str) -> dict[str, Any]:
+def init_actor_state(path: str, device: str) -> dict[str, Any]:
     """The actor weights of checkpoint ``path`` (read before any demonstration is planned,
     so that a wrong path fails at once)."""
     from ..models.checkpoint import load_checkpoint
@@ -625,7 +625,7 @@ def _init_actor_state(path: str, device: str) -> dict[str, Any]:
     return dict(data["actor"])
 
 
-def _load_init_actor(actor: Actor, state: dict[str, Any], path: str) -> None:
+def load_init_actor(actor: Actor, state: dict[str, Any], path: str) -> None:
     """Load ``state`` into ``actor``; a clear error where its network differs from this run's."""
     try:
         actor.load_state_dict(state)

@@ -24,7 +24,7 @@ import torch
 
 from ..envs.core import EnvConfig
 from ..models.actor_critic import Actor
-from ..models.checkpoint import load_checkpoint, to_dict
+from ..models.checkpoint import to_dict
 from ..models.inputs import goal_dim
 from ..models.policy import Policy
 from ..scenes.scenarios import Scenario, make_scenario
@@ -36,7 +36,9 @@ from .bc import (
     demos_from_paths,
     fit_actor,
     generate_demos,
+    init_actor_state,
     load_demos,
+    load_init_actor,
     observation_shape,
     plan_demos,
     policy_payload,
@@ -314,7 +316,7 @@ class _DaggerRun:
         else:
             self.demos = first_demos(cfg, self.scenario, self.demos_path, progress, pool)
             if init_actor:
-                self.actor.load_state_dict(load_checkpoint(init_actor, b.device)["actor"])
+                load_init_actor(self.actor, init_actor_state(init_actor, b.device), init_actor)
         self.policy = Policy(self.actor, self.robot, {"observation": b.observation, "n_points": b.n_points}, b.device)
         self.val_problems = self.scenario.problems("val", cfg.eval_episodes, seed=b.seed)
         self.t0 = time.perf_counter()

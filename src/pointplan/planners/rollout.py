@@ -507,17 +507,13 @@ def _results(
 # ---------------------------------------------------------------- steppers
 class _Rows:
     """A few environments of a lockstep batch taken apart (the screened escape's robots):
-    their own observer and their obstacles as they are at their time steps, their bounds,
-    and the motion checks made for them."""
+    their own observer, their obstacles as they are at their time steps, and their
+    workspace bounds."""
 
     def __init__(self, core: BatchedCore, idx: np.ndarray) -> None:
-        self.core, self.idx, self.t = core, idx, core.t[idx].copy()
+        self.t = core.t[idx].copy()
         self.observer, self.world = core.rows(idx, self.t)
-        self.checks: Any = 0
-
-    def bounds(self) -> tuple[CollisionWorld, np.ndarray, np.ndarray]:
-        """Their obstacles and workspace bounds, for ``q_free``."""
-        return self.world, self.core.low[self.idx], self.core.high[self.idx]
+        self.low, self.high = core.low[idx], core.high[idx]
 
 
 class _Lockstep(_Stepper):
@@ -607,25 +603,14 @@ class _Lockstep(_Stepper):
         self.pending_checks = self.pending_checks + checks
         return a
 
-    def _free_move(
-        self, a: np.ndarray, q: np.ndarray | None = None, rows: _Rows | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Where actions ``a`` would take the robots from ``q`` (default: where they are),
-        as far as each is free among the obstacles as they are now (what the robot's
-        sensors show: no look at where moving ones will be); the motion checks of each.
-        With ``rows``, ``a`` and ``q`` are those environments' alone."""
-        core = self.core
+    def _free_move(self, a: np.ndarray, q: np.ndarray, rows: _Rows) -> tuple[np.ndarray, np.ndarray]:
+        """Where actions ``a`` would take the robots ``rows`` from ``q``, as far as each is
+        free among the obstacles as they are now (what the robot's sensors show: no look at
+        where moving ones will be); the motion checks of each."""
+        config = self.core.config
         tw = np.clip(a.astype(np.float64), -1.0, 1.0) * self.robot.action_scale
-        world, low, high = (core.world_at(core.t), core.low, core.high) if rows is None else rows.bounds()
         q1, _, n = q_free(
-            self.robot,
-            world,
-            core.q if q is None else q,
-            tw,
-            low,
-            high,
-            core.config.substep,
-            clip_target=core.config.bounds == "clip",
+            self.robot, rows.world, q, tw, rows.low, rows.high, config.substep, clip_target=config.bounds == "clip"
         )
         return q1, np.asarray(n)
 
@@ -640,39 +625,42 @@ class _Lockstep(_Stepper):
         q0, tg, ob = self.core.q[idx].copy(), target[idx].copy(), obs[idx]
         best = a[idx].copy()
         q1, checks = self._free_move(best, q0, rows)
-        far = self._score(q1, q0, tg, rows)
+        far, ahead = self._score(q1, q0, tg, rows)
+        checks = checks + ahead
         for _ in range(self.esc.tries - 1):
             draw = self.esc.noise * self.nrng.standard_normal(best.shape)
             b = np.asarray(self.act(ob, q0.copy(), tg.copy(), noise=draw), np.float32)
             q1, n = self._free_move(b, q0, rows)
-            d = self._score(q1, q0, tg, rows)
+            d, ahead = self._score(q1, q0, tg, rows)
             better = d > far
             best[better], far[better] = b[better], d[better]
-            checks = checks + n
+            checks = checks + n + ahead
         a[idx] = best
         counted = np.zeros(len(a), np.int64)
-        counted[idx] = checks + rows.checks
+        counted[idx] = checks
         self.pending_checks = self.pending_checks + counted
         return a
 
-    def _score(self, q1: np.ndarray, q0: np.ndarray, target: np.ndarray, rows: _Rows) -> np.ndarray:
+    def _score(
+        self, q1: np.ndarray, q0: np.ndarray, target: np.ndarray, rows: _Rows
+    ) -> tuple[np.ndarray, np.ndarray | int]:
         """How far each draw that ends at ``q1`` takes its robot from ``q0`` (the
         environments ``rows``): its own motion, or with a lookahead (:class:`Escape`) where
-        the mean action then carries it (infinite where it arrives at ``target``; the
-        lookahead's checks added to ``rows.checks``)."""
+        the mean action then carries it (infinite where it arrives at ``target``); and the
+        lookahead's motion checks."""
         robot = self.robot
         d = np.asarray(robot.distance(q1, q0), np.float64)
         look = d >= _MOVED
         if not self.esc.lookahead or not look.any():
-            return d
-        qk, arrived = q1.copy(), np.zeros(len(q1), bool)
+            return d, 0
+        qk, arrived, checks = q1.copy(), np.zeros(len(q1), bool), np.zeros(len(q1), np.int64)
         for _ in range(self.esc.lookahead):
             obs = rows.observer.observe(qk, self.look_rng, rows.t)
             qk, n = self._free_move(np.asarray(self.act(obs, qk.copy(), target.copy())), qk, rows)
-            rows.checks = rows.checks + np.where(look, n, 0)
+            checks += np.where(look, n, 0)
             arrived |= goal_reached(robot, self.core.config, qk, target, np.zeros(len(qk), bool))
         ahead = np.where(arrived, np.inf, np.asarray(robot.distance(qk, q0), np.float64))
-        return np.where(look, ahead, d)
+        return np.where(look, ahead, d), checks
 
     def move(self, a: np.ndarray, st: _State) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         _, term, _, info = self.core.step(a)
