@@ -135,6 +135,11 @@ def step_reward(config: EnvConfig, action_norm: Array, collided: Bool, success: 
     )
 
 
+def _stacked_at(scenes: Sequence[Scene], t: NDArray[np.int64]) -> CollisionWorld:
+    """The obstacles of ``scenes``, each at its own time ``t[i]``, stacked."""
+    return CollisionWorld.stack([s.world_at(int(ti)) for s, ti in zip(scenes, t)])
+
+
 class BatchedCore:
     """``E`` planning environments of one scenario stepping in lockstep."""
 
@@ -209,7 +214,7 @@ class BatchedCore:
             return self.world
         if len(scenes) != self.num_envs:
             raise RuntimeError("reset every environment before stepping")
-        return CollisionWorld.stack([s.world_at(int(ti)) for s, ti in zip(scenes, t)])
+        return _stacked_at(scenes, t)
 
     def rows(self, idx: Sequence[int] | NDArray[np.int64], t: NDArray[np.int64]) -> tuple[Observer, CollisionWorld]:
         """A fresh observer of this core's kind bound to the scenes of environments ``idx``
@@ -221,8 +226,7 @@ class BatchedCore:
             raise RuntimeError("reset every environment before stepping")
         observer = make_observer(self.observation, self.robot, **self._observer_kwargs)
         observer.bind(scenes)
-        world = CollisionWorld.stack([s.world_at(int(ti)) for s, ti in zip(scenes, t)])
-        return observer, world
+        return observer, _stacked_at(scenes, t)
 
     # ------------------------------------------------------------------ step
     def observe(self, rng: np.random.Generator) -> dict[str, NDArray[np.float32]]:
