@@ -55,11 +55,7 @@ def main() -> None:
                 a = other(obs[None], q[None], target[None], noise[None])[0]
             else:
                 a = eng._act(obs, q, target, noise)
-            q1, _, n = self._free_move(q[None], np.asarray(a, np.float32)[None])
-            self.pending_checks += int(np.sum(n))
-            d = float(np.asarray(robot.distance(q1, q[None]))[0])
-            if eng.escape.lookahead and d >= R._MOVED:
-                d = self._ahead(q1[0], q, target)
+            d = self._score(a, q, target)
             if d > far:
                 best, far, from_other = a, d, k < k_other
         stats["escapes"] += 1

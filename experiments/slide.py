@@ -197,11 +197,7 @@ def main() -> None:
         cands = cands[1:] + extra
         best, far = None, -np.inf
         for a in cands:
-            q1, _, n = self._free_move(q[None], np.asarray(a, np.float32)[None])
-            self.pending_checks += int(np.sum(n))
-            d = float(np.asarray(robot.distance(q1, q[None]))[0])
-            if eng.escape.lookahead and d >= R._MOVED:
-                d = self._ahead(q1[0], q, target)
+            d = self._score(a, q, target)
             if d > far:
                 best, far = a, d
         stats["taken"] += any(best is e for e in extra)

@@ -792,16 +792,22 @@ class _OneRobot(_Stepper):
         best, far = None, -np.inf
         for _ in range(eng.escape.tries):
             a = eng._act(obs, q, target, self._noise(True))
-            q1, _, n = self._free_move(q[None], np.asarray(a, np.float32)[None])
-            self.pending_checks += int(np.sum(n))
-            d = float(np.asarray(self.robot.distance(q1, q[None]))[0])
-            if eng.escape.lookahead and d >= _MOVED:
-                d = self._ahead(q1[0], q, target)
+            d = self._score(a, q, target)
             if d > far:
                 best, far = a, d
         self.timing.motion += time.perf_counter() - tc
         assert best is not None
         return best
+
+    def _score(self, a: np.ndarray, q: np.ndarray, target: np.ndarray) -> float:
+        """How far one escape draw ``a`` takes the robot from ``q``: its free motion, or
+        its lookahead's (:class:`Escape`); its motion checks are counted with the step's."""
+        q1, _, n = self._free_move(q[None], np.asarray(a, np.float32)[None])
+        self.pending_checks += int(np.sum(n))
+        d = float(np.asarray(self.robot.distance(q1, q[None]))[0])
+        if self.engine.escape.lookahead and d >= _MOVED:
+            d = self._ahead(q1[0], q, target)
+        return d
 
     def _ahead(self, q1: np.ndarray, q: np.ndarray, target: np.ndarray) -> float:
         """How far from ``q`` the mean action carries the robot in the escape's lookahead
