@@ -15,7 +15,10 @@ actions for the S-shape (cells ``policy-local-escK``), steps toward a random sub
 the sphere (cells ``policy-local-subK``), in every scene. With ``--dodge N`` the
 rollouts among moving obstacles replace an action that would meet them where their last
 step's motion carries them by the nearest of standing still and N sampled ones that does
-not (``pointplan eval --dodge``; cells ``...-dodgeN`` in 3D-Dynamic). Without these the
+not (``pointplan eval --dodge``; cells ``...-dodgeN`` in 3D-Dynamic). A robot whose
+policies check their moves with a finer sub-step than the environments' 0.01
+(``SUBSTEP_DEFAULTS``: the S-shape told its orientation, in Slot) gets cells named
+``...-checkS`` (S the sub-step). Without these the
 policies plan with the mean action throughout, whatever the planner's default. Other
 planner names (``birrt``, ``hybrid``: the robot's default policy, then Bi-RRT, 10 s a
 query) are built by ``make_planner`` with their defaults.
@@ -28,6 +31,7 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+from pointplan.envs.core import EnvConfig
 from pointplan.evaluation import evaluate
 from pointplan.planners import make_planner
 from pointplan.planners.rollout import DODGE_DEFAULT, DODGE_OFF, RolloutOptions
@@ -104,6 +108,8 @@ def run(args: argparse.Namespace) -> None:
                     planner_name = f"{planner_name}-{kind}{args.escape}{tries}"
                 if dodge.on:
                     planner_name = f"{planner_name}-dodge{dodge.draws}"
+                if planner.env.substep != EnvConfig().substep:  # the robot's finer motion check
+                    planner_name = f"{planner_name}-check{planner.env.substep:g}"
                 if args.attempts > 1:
                     planner_name = f"{planner_name}-x{args.attempts}"
             else:
@@ -126,14 +132,14 @@ def table(robot: str) -> str:
 
     def order(
         name: str,
-    ) -> tuple[str, int, int, int, int, int]:  # policy-OBS[-escK[tN[lL]]|-subK][-dodgeD][-xK]
+    ) -> tuple[str, int, int, int, int, int, str]:  # policy-OBS[-escK[tN[lL]]|-subK][-dodgeD][-xK][-checkS]
         parts = name.split("-")[2:]
         kind = next((p[3:] for p in parts if p.startswith(("esc", "sub"))), "0")
         esc, _, tries = kind.partition("t")
         tries, _, ahead = tries.partition("l")
         dodge = next((int(p[5:]) for p in parts if p.startswith("dodge")), 0)
         att = next((int(p[1:]) for p in parts if p.startswith("x")), 1)
-        return name.split("-")[1], int(esc), int(tries or 1), int(ahead or 0), dodge, att
+        return name.split("-")[1], int(esc), int(tries or 1), int(ahead or 0), dodge, att, name
 
     base = ("policy-global", "policy-local")
     tried = sorted({p.stem.split("_", 2)[2] for p in OUT.glob(f"{robot}_*_policy-*.json")} - set(base), key=order)

@@ -621,6 +621,34 @@ def test_q_free_stays_free_and_in_bounds(indices: list[int], seed: int, scale: f
         assert np.all(s_cmd[~inside & ~stop_col] < 1)
 
 
+def test_finer_substeps_certify_moves_closer_to_an_obstacle() -> None:
+    """The motion check grows the body by half a sub-step's sweep: in an opening 2.1 bars
+    wide (2 mm each side of the S-shape's bar), a turning move that the exact evaluator
+    finds free (2-3 mm from the walls) is stopped short with sub-steps of 0.01 and taken
+    whole with 0.005, the Slot planner's sub-step."""
+    from pointplan.evaluation.clearance import Clearance, advance
+    from pointplan.robots import make_robot
+
+    robot = make_robot("sshape")
+    width, bar = 2.1 * 0.036, 0.036
+    walls = [Box(center=[0, s * (width / 2 + 0.5), 0], size=[bar, 1.0, 2.0]) for s in (1, -1)]
+    world = CollisionWorld.from_shapes(walls, 3)
+    q0 = np.array([0.073, 0.082, -0.009, 0, 0, 0, 1.0])  # the first bar through the opening
+    low, high = np.full((1, 3), -2.0), np.full((1, 3), 2.0)
+    exact = Clearance(robot, walls)
+    assert abs(exact(q0) - (width - bar) / 2) < 1e-6
+    moves = [[-0.0426, 0.0033, 0.012, 0.0018, 0.0195, -0.0008], [-0.0398, 0.0024, 0.007, -0.0198, -0.0075, 0.0202]]
+    for tw in np.array(moves):
+        end = robot.integrate(q0[None], tw[None])[0]
+        free, low_clearance = advance(exact, robot, q0, end)
+        assert free and 0.002 < low_clearance < 0.004
+        coarse, stopped, _ = q_free(robot, world, q0[None], tw[None], low, high, substep=0.01)
+        fine, fine_stopped, _ = q_free(robot, world, q0[None], tw[None], low, high, substep=0.005)
+        assert stopped[0] and robot.distance(coarse, end[None])[0] > 0.005
+        assert not fine_stopped[0]
+        np.testing.assert_allclose(fine[0], end, atol=1e-9)
+
+
 @given(
     index=st.integers(0, 10_000),
     box=st.integers(0, 4),

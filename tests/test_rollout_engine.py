@@ -86,6 +86,19 @@ def test_options_are_validated_once() -> None:
     )  # fewer draws asked for
 
 
+def test_planner_takes_the_robots_substep_unless_given_an_environment() -> None:
+    from pointplan.envs.core import EnvConfig
+    from pointplan.planners.rollout import SUBSTEP_DEFAULTS, default_substep
+
+    assert default_substep("sshape-oriented") == SUBSTEP_DEFAULTS["sshape-oriented"] < EnvConfig().substep
+    assert default_substep("sshape") is None
+    oriented = shipped_checkpoint("sshape-oriented", "local", scene="slot")
+    assert PolicyPlanner(oriented).env.substep == SUBSTEP_DEFAULTS["sshape-oriented"]
+    assert PolicyPlanner(shipped_checkpoint("sshape", "local")).env.substep == EnvConfig().substep
+    given = EnvConfig(observation="local", substep=0.01)
+    assert PolicyPlanner(oriented, env=given).env.substep == 0.01
+
+
 def test_stall_ends_a_rollout_in_every_stepper() -> None:
     """The stall test is one feature of the loop: the batched core stops a rollout that
     stands still too (it ran to the horizon before)."""

@@ -34,6 +34,7 @@ from .rollout import (
     RolloutEngine,
     RolloutOptions,
     connect_to_goal,
+    default_substep,
     rollout_batch,
     torch_threads,
 )
@@ -61,6 +62,10 @@ class PolicyPlanner:
       "stalled"``; off by default; the hybrid planner uses 10 steps and 0.035);
     - ``greedy_goal``, ``connect_goal``: the goal tests (both on by default);
     - ``draws``: the action of a step is the mean over this many observations.
+
+    ``env``: the environment's settings the rollout steps with (an
+    :class:`~pointplan.envs.core.EnvConfig`); ``None``: the policy's observation and the
+    robot's planning sub-step (:data:`~pointplan.planners.rollout.SUBSTEP_DEFAULTS`).
 
     ``observer_wrapper``: a function ``observer -> observer`` applied to the observer of
     ``plan`` (e.g. :func:`pointplan.observers.perturb.perturbation`: noisy, dropped or
@@ -96,7 +101,11 @@ class PolicyPlanner:
         self.robot = robot or policy.robot
         if self.robot.name != policy.robot.name:
             raise ValueError(f"the policy was trained for robot {policy.robot.name!r}, not {self.robot.name!r}")
-        env = env or EnvConfig(observation=policy.observation, n_points=policy.n_points)
+        if env is None:
+            env = EnvConfig(observation=policy.observation, n_points=policy.n_points)
+            substep = default_substep(self.robot)
+            if substep is not None:
+                env = replace(env, substep=substep)
         if env.observation != policy.observation:
             raise ValueError(f"the policy was trained on {policy.observation!r} observations, not {env.observation!r}")
         self.options = replace(options or RolloutOptions(), **option_fields)
