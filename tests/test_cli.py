@@ -531,6 +531,27 @@ def test_eval_escape_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert "--escape-lookahead" in capsys.readouterr().err
 
 
+def test_eval_substep_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--substep`` reaches the policy planner's motion check (finer: more checks for the
+    same rollouts' moves) and the hybrid's policy; other planners are refused."""
+    from pointplan.planners import make_planner
+    from pointplan.robots import make_robot
+
+    args = ["eval", "--env", "boxes3d", "--robot", "sshape", "--observation", "local", "--planner", "policy"]
+    runs = {}
+    for name, extra in (("default", []), ("fine", ["--substep", "0.0025"])):
+        out = tmp_path / f"{name}.json"
+        assert main([*args, "--episodes", "6", *extra, "--json", str(out), "--quiet"]) == 0
+        runs[name] = json.loads(out.read_text())
+    assert runs["fine"]["collision_checks_mean"] > runs["default"]["collision_checks_mean"]
+    assert main(["eval", "--planner", "birrt", "--episodes", "2", "--substep", "0.005", "--quiet"]) == 2
+    assert "--substep" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main([*args, "--episodes", "2", "--substep", "0", "--quiet"])
+    hybrid = make_planner("hybrid", make_robot("sshape"), observation="local", substep=0.005)
+    assert hybrid.policy.env.substep == 0.005  # type: ignore[attr-defined]
+
+
 def test_eval_dodge_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``--dodge`` reaches the policy planner among moving obstacles (on by default, 0: off);
     other planners are refused."""

@@ -97,6 +97,11 @@ def test_planner_takes_the_robots_substep_unless_given_an_environment() -> None:
     assert PolicyPlanner(shipped_checkpoint("sshape", "local")).env.substep == EnvConfig().substep
     given = EnvConfig(observation="local", substep=0.01)
     assert PolicyPlanner(oriented, env=given).env.substep == 0.01
+    assert PolicyPlanner(oriented, substep=0.02).env.substep == 0.02  # the keyword before the robot's
+    assert PolicyPlanner(oriented, env=given, substep=0.0025).env.substep == 0.0025
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="substep"):
+            PolicyPlanner(oriented, substep=bad)
 
 
 def test_stall_ends_a_rollout_in_every_stepper() -> None:

@@ -60,6 +60,7 @@ def _hybrid_factory(
     fallback: str = "birrt",
     time_limit: float | None = 10.0,
     horizon: int | None = None,
+    substep: float | None = None,
     **kw: Any,
 ) -> Planner:
     """The policy (``checkpoint`` or the shipped one, for ``scene`` if one ships), stopped when it stalls (moved less
@@ -69,8 +70,8 @@ def _hybrid_factory(
     motion checks; other keywords go to :class:`~pointplan.planners.ompl.OMPLPlanner`).
     ``time_limit``: seconds for the whole query (10 by default; the Bi-RRT fallback then
     has no node budget unless ``max_nodes`` is given; ``None``: Bi-RRT's 10,000 nodes). ``attempts``, ``action_noise``,
-    ``escape``, ``dodge``: the policy's sampled retries, stall escapes and dodge among moving
-    obstacles (:class:`PolicyPlanner`)."""
+    ``escape``, ``dodge``, ``substep``: the policy's sampled retries, stall escapes, dodge among moving
+    obstacles and motion check (:class:`PolicyPlanner`)."""
     from .hybrid import HybridPlanner
 
     policy = _policy_factory(
@@ -85,6 +86,7 @@ def _hybrid_factory(
         escape=escape,
         dodge=dodge,
         horizon=horizon,
+        substep=substep,
     )
     if fallback.lower() == "birrt":
         if max_nodes is None and time_limit is None:

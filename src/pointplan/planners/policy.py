@@ -19,6 +19,7 @@ rollout that does not get there ends with ``"horizon"`` (or ``"stalled"``,
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import fields, replace
 from pathlib import Path
@@ -66,6 +67,8 @@ class PolicyPlanner:
     ``env``: the environment's settings the rollout steps with (an
     :class:`~pointplan.envs.core.EnvConfig`); ``None``: the policy's observation and the
     robot's planning sub-step (:data:`~pointplan.planners.rollout.SUBSTEP_DEFAULTS`).
+    ``substep``: the largest sub-step of the motion check (geodesic distance), replacing
+    the one of ``env`` or the robot's; finer certifies moves closer to obstacles.
 
     ``observer_wrapper``: a function ``observer -> observer`` applied to the observer of
     ``plan`` (e.g. :func:`pointplan.observers.perturb.perturbation`: noisy, dropped or
@@ -84,6 +87,7 @@ class PolicyPlanner:
         env: EnvConfig | None = None,
         options: RolloutOptions | None = None,
         observer_wrapper: Callable[[Any], Any] | None = None,
+        substep: float | None = None,
         **option_fields: Any,
     ) -> None:
         from ..models.policy import Policy
@@ -101,11 +105,13 @@ class PolicyPlanner:
         self.robot = robot or policy.robot
         if self.robot.name != policy.robot.name:
             raise ValueError(f"the policy was trained for robot {policy.robot.name!r}, not {self.robot.name!r}")
+        if substep is not None and not (math.isfinite(substep) and substep > 0):
+            raise ValueError(f"substep must be a finite number > 0, not {substep}")
         if env is None:
             env = EnvConfig(observation=policy.observation, n_points=policy.n_points)
-            substep = default_substep(self.robot)
-            if substep is not None:
-                env = replace(env, substep=substep)
+            substep = substep or default_substep(self.robot)
+        if substep is not None:
+            env = replace(env, substep=substep)
         if env.observation != policy.observation:
             raise ValueError(f"the policy was trained on {policy.observation!r} observations, not {env.observation!r}")
         self.options = replace(options or RolloutOptions(), **option_fields)
