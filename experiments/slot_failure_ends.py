@@ -1,7 +1,8 @@
 """Where the oriented S-shape's failed Slot rollouts end: for the validation problems
 (both draws of 500) whose opening is ``--min-bars`` to ``--max-bars`` bar thicknesses
 wide, each failure's end (``info["end"]``), steps, final frame position and geodesic
-distance to the goal, with the shipped `local` policy through the planner as it is (its
+distance to the goal, how many of its last steps did not move it at all (frozen) and its
+final clearance (the evaluator's exact distance), with the shipped `local` policy through the planner as it is (its
 default escape and motion check). A failure still in the opening ends near x = 0; one
 past the wall ends at x > 0.1.
 
@@ -26,6 +27,7 @@ def main() -> None:
     import torch
 
     torch.set_num_threads(1)
+    from pointplan.evaluation.clearance import Clearance
     from pointplan.evaluation.evaluate import evaluate
     from pointplan.models.policy import Policy
     from pointplan.planners.policy import PolicyPlanner
@@ -47,10 +49,13 @@ def main() -> None:
             res = planner.plan(p)
             q = res.path[-1]
             dist = float(sc.robot.distance(q[None], p.goal[None])[0])
+            moved = sc.robot.distance(res.path[1:], res.path[:-1])
+            frozen = len(moved) - (int(np.flatnonzero(moved > 1e-9)[-1]) + 1 if np.any(moved > 1e-9) else 0)
+            clearance = Clearance(sc.robot, p.scene.obstacles)(q)
             print(
                 f"draw {seed} problem {i}: {bars[i]:.2f} bars, end {res.info.get('end')} after {len(res.path) - 1} steps "
                 f"at {np.round(q[:3], 2)}, {dist:.2f} from the goal at {np.round(p.goal[:3], 2)}, "
-                f"{res.info.get('escapes', 0)} escapes",
+                f"{res.info.get('escapes', 0)} escapes, frozen for the last {frozen} steps, clearance {1000 * clearance:.2f} mm",
                 flush=True,
             )
 
