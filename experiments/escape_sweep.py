@@ -62,6 +62,19 @@ def by_width(widths: list[float], success: list[bool]) -> dict[str, list[int]]:
     return out
 
 
+def policy_and_problems(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    """The policy (``args.checkpoint`` or the shipped one of ``args.robot`` and
+    ``args.observation``), its checkpoint's path, the scenario (``args.env`` or the
+    policy's own) and ``args.episodes`` validation problems of draw ``args.val_seed``."""
+    from pointplan.models.policy import Policy, shipped_checkpoint
+    from pointplan.scenes.scenarios import make_scenario
+
+    ckpt = args.checkpoint or str(shipped_checkpoint(args.robot, args.observation))
+    policy = Policy.from_checkpoint(ckpt)
+    scenario = make_scenario(args.env or policy.env, robot=policy.robot.name)
+    return policy, ckpt, scenario, scenario.problems("val", args.episodes, seed=args.val_seed)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("checkpoint", nargs="?", help="policy checkpoint (default: the shipped one)")
@@ -84,14 +97,9 @@ def main() -> None:
 
     torch.set_num_threads(1)
     from pointplan.evaluation.evaluate import evaluate
-    from pointplan.models.policy import Policy, shipped_checkpoint
     from pointplan.planners.policy import PolicyPlanner
-    from pointplan.scenes.scenarios import make_scenario
 
-    ckpt = args.checkpoint or str(shipped_checkpoint(args.robot, args.observation))
-    policy = Policy.from_checkpoint(ckpt)
-    scenario = make_scenario(args.env or policy.env, robot=policy.robot.name)
-    problems = scenario.problems("val", args.episodes, seed=args.val_seed)
+    policy, ckpt, scenario, problems = policy_and_problems(args)
     rows = []
     for esc in args.configs:
         planner = PolicyPlanner(policy, robot=scenario.robot, escape=esc, seed=args.escape_seed)

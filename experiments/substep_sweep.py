@@ -32,17 +32,13 @@ def main() -> None:
     import torch
 
     torch.set_num_threads(1)
-    from pointplan.envs.core import EnvConfig
+    from escape_sweep import by_width, policy_and_problems  # type: ignore[import-not-found]
+
     from pointplan.evaluation.evaluate import evaluate
-    from pointplan.models.policy import Policy, shipped_checkpoint
     from pointplan.planners.policy import PolicyPlanner
     from pointplan.robots.sshape import BAR_THICKNESS
-    from pointplan.scenes.scenarios import make_scenario
 
-    ckpt = args.checkpoint or str(shipped_checkpoint(args.robot, args.observation))
-    policy = Policy.from_checkpoint(ckpt)
-    scenario = make_scenario(args.env or policy.env, robot=policy.robot.name)
-    problems = scenario.problems("val", args.episodes, seed=args.val_seed)
+    policy, ckpt, scenario, problems = policy_and_problems(args)
     slot = "slot" in problems[0].scene.__dict__
     if args.max_bars is not None:
         if not slot:
@@ -50,8 +46,7 @@ def main() -> None:
         problems = [p for p in problems if p.scene.__dict__["slot"]["width"] / BAR_THICKNESS < args.max_bars]
     rows = []
     for s in args.substeps:
-        env = EnvConfig(observation=policy.observation, n_points=policy.n_points, substep=s)
-        planner = PolicyPlanner(policy, robot=scenario.robot, env=env)
+        planner = PolicyPlanner(policy, robot=scenario.robot, substep=s)
         t0 = time.perf_counter()
         report = evaluate(planner, problems, scenario.robot, progress=False)
         m = report.metrics()
@@ -66,8 +61,6 @@ def main() -> None:
             "wall_s": time.perf_counter() - t0,
         }
         if slot:
-            from escape_sweep import by_width  # type: ignore[import-not-found]
-
             row["by_width_bars"] = by_width([p.scene.__dict__["slot"]["width"] for p in problems], ok)
         rows.append(row)
         print(
