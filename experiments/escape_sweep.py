@@ -1,7 +1,8 @@
 """Escapes through the planner itself: success of ``PolicyPlanner`` with each escape on
 validation problems (docs/results/3d-sphere.md, "How the escape was chosen"). Each ``--configs`` entry is
-``STEPS:NOISE:STILL:WINDOW[:subgoal][:tN][:lN]`` (``0`` alone: no escape; ``tN``: N draws
-per escape step, the furthest-moving taken; ``lN``: judged by N steps of lookahead), for example the sphere's default and the S-shape's:
+``STEPS:NOISE:STILL:WINDOW[:subgoal][:tN][:lN][:bX]`` (``0`` alone: no escape; ``tN``: N draws
+per escape step, the furthest-moving taken; ``lN``: judged by N steps of lookahead; ``bX``:
+where no draw moves, back off along the path to a pose more than X away), for example the sphere's default and the S-shape's:
 
     python experiments/escape_sweep.py --robot sphere3d --observation local --episodes 500 --configs 0 10:0:0.1:6:subgoal
     python experiments/escape_sweep.py --robot sshape --observation global --configs 10:2:0.01:1:t8 10:0:0.01:1:subgoal
@@ -23,14 +24,15 @@ def parse_config(text: str):  # type: ignore[no-untyped-def]
     if text == "0":
         return Escape(steps=0)
     parts = text.split(":")
-    extra = {"t": 1, "l": 0}  # draws per escape step (the furthest taken); steps of lookahead
-    while parts and parts[-1][:1] in extra and parts[-1][1:].isdigit():
+    # draws per escape step (the furthest taken); steps of lookahead; the back-off's distance
+    extra: dict[str, float] = {"t": 1, "l": 0, "b": 0.0}
+    while parts and parts[-1][:1] in extra and parts[-1][1:].replace(".", "", 1).isdigit():
         last = parts.pop()
-        extra[last[0]] = int(last[1:])
-    tries, lookahead = extra["t"], extra["l"]
+        extra[last[0]] = float(last[1:])
+    tries, lookahead, backoff = int(extra["t"]), int(extra["l"]), extra["b"]
     if len(parts) not in (4, 5) or (len(parts) == 5 and parts[4] != "subgoal"):
         raise argparse.ArgumentTypeError(
-            f"an escape is STEPS:NOISE:STILL:WINDOW[:subgoal][:tN][:lN] or 0, not {text!r}"
+            f"an escape is STEPS:NOISE:STILL:WINDOW[:subgoal][:tN][:lN][:bX] or 0, not {text!r}"
         )
     try:
         return Escape(
@@ -41,6 +43,7 @@ def parse_config(text: str):  # type: ignore[no-untyped-def]
             subgoal=len(parts) == 5,
             tries=tries,
             lookahead=lookahead,
+            backoff=backoff,
         )
     except ValueError as e:
         raise argparse.ArgumentTypeError(str(e)) from e
@@ -89,7 +92,7 @@ def main() -> None:
         type=parse_config,
         nargs="+",
         required=True,
-        help="escapes, STEPS:NOISE:STILL:WINDOW[:subgoal][:tN][:lN] or 0",
+        help="escapes, STEPS:NOISE:STILL:WINDOW[:subgoal][:tN][:lN][:bX] or 0",
     )
     ap.add_argument("--json", help="write the rows here")
     args = ap.parse_args()
@@ -115,6 +118,7 @@ def main() -> None:
                 "subgoal": esc.subgoal,
                 "tries": esc.tries,
                 "lookahead": esc.lookahead,
+                "backoff": esc.backoff,
             },
             "success": m["success_rate"],
             "mean_steps": m["nodes_mean"],

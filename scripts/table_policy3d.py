@@ -18,7 +18,8 @@ step's motion carries them by the nearest of standing still and N sampled ones t
 not (``pointplan eval --dodge``; cells ``...-dodgeN`` in 3D-Dynamic). A robot whose
 policies check their moves with a finer sub-step than the environments' 0.01
 (``SUBSTEP_DEFAULTS``: the S-shape told its orientation, in Slot) gets cells named
-``...-checkS`` (S the sub-step). Without these the
+``...-checkS`` (S the sub-step); one whose escape backs off where no draw moves
+(``Escape.backoff``) gets ``...bB`` after its draws and lookahead. Without these the
 policies plan with the mean action throughout, whatever the planner's default. Other
 planner names (``birrt``, ``hybrid``: the robot's default policy, then Bi-RRT, 10 s a
 query) are built by ``make_planner`` with their defaults.
@@ -89,6 +90,8 @@ def run(args: argparse.Namespace) -> None:
                 esc = RolloutOptions(escape=args.escape).escape_for(scenario.robot, args.escape_tries)
                 if args.escape_lookahead is not None:
                     esc = replace(esc, lookahead=args.escape_lookahead)
+                if args.escape_backoff is not None:
+                    esc = replace(esc, backoff=args.escape_backoff)
                 moving = scenario.scene("test", 0).dynamic
                 dodge = replace(DODGE_DEFAULT, draws=args.dodge) if args.dodge and moving else DODGE_OFF
                 planner = make_planner(
@@ -105,6 +108,7 @@ def run(args: argparse.Namespace) -> None:
                     kind = "sub" if esc.subgoal else "esc"
                     tries = f"t{esc.tries}" if esc.tries > 1 else ""
                     tries += f"l{esc.lookahead}" if esc.lookahead and esc.tries > 1 else ""
+                    tries += f"b{esc.backoff:g}" if esc.backoff and esc.tries > 1 else ""
                     planner_name = f"{planner_name}-{kind}{args.escape}{tries}"
                 if dodge.on:
                     planner_name = f"{planner_name}-dodge{dodge.draws}"
@@ -132,14 +136,15 @@ def table(robot: str) -> str:
 
     def order(
         name: str,
-    ) -> tuple[str, int, int, int, int, int, str]:  # policy-OBS[-escK[tN[lL]]|-subK][-dodgeD][-xK][-checkS]
+    ) -> tuple[str, int, int, int, float, int, int, str]:  # policy-OBS[-escK[tN[lL][bB]]|-subK][-dodgeD][-xK][-checkS]
         parts = name.split("-")[2:]
         kind = next((p[3:] for p in parts if p.startswith(("esc", "sub"))), "0")
+        kind, _, back = kind.partition("b")
         esc, _, tries = kind.partition("t")
         tries, _, ahead = tries.partition("l")
         dodge = next((int(p[5:]) for p in parts if p.startswith("dodge")), 0)
         att = next((int(p[1:]) for p in parts if p.startswith("x")), 1)
-        return name.split("-")[1], int(esc), int(tries or 1), int(ahead or 0), dodge, att, name
+        return name.split("-")[1], int(esc), int(tries or 1), int(ahead or 0), float(back or 0), dodge, att, name
 
     base = ("policy-global", "policy-local")
     tried = sorted({p.stem.split("_", 2)[2] for p in OUT.glob(f"{robot}_*_policy-*.json")} - set(base), key=order)
@@ -197,6 +202,12 @@ def main() -> None:
         type=int,
         default=None,
         help="policy planners: each escape draw judged by this many steps of the mean action from its end (default: the robot's; cells named -escKtNlL where L > 0)",
+    )
+    ap.add_argument(
+        "--escape-backoff",
+        type=float,
+        default=None,
+        help="policy planners: where no escape draw moves the robot, back off along its path to a pose more than this far away (default: the robot's; cells named -escKtN...bB where B > 0)",
     )
     ap.add_argument(
         "--dodge",

@@ -552,6 +552,25 @@ def test_eval_substep_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert hybrid.policy.env.substep == 0.005  # type: ignore[attr-defined]
 
 
+def test_eval_escape_backoff_flag(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--escape-backoff`` reaches the policy planner's escape (the rest of it the robot's
+    default); other planners, and a negative distance, are refused."""
+    from pointplan.cli import _planner, build_parser
+    from pointplan.planners.rollout import ESCAPE_DEFAULTS
+    from pointplan.robots import make_robot
+
+    base = ["eval", "--env", "boxes3d", "--robot", "sshape", "--observation", "local", "--planner", "policy"]
+    args = build_parser().parse_args([*base, "--escape-backoff", "0.05"])
+    esc = _planner("policy", make_robot("sshape"), args, 0).escape  # type: ignore[attr-defined]
+    assert esc.backoff == 0.05 and esc.tries == ESCAPE_DEFAULTS["sshape"].tries
+    args = build_parser().parse_args(base)
+    assert _planner("policy", make_robot("sshape"), args, 0).escape == ESCAPE_DEFAULTS["sshape"]  # type: ignore[attr-defined]
+    assert main(["eval", "--planner", "birrt", "--episodes", "2", "--escape-backoff", "0.03", "--quiet"]) == 2
+    assert "--escape-backoff" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main([*base, "--episodes", "2", "--escape-backoff", "-1", "--quiet"])
+
+
 def test_eval_dodge_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``--dodge`` reaches the policy planner among moving obstacles (on by default, 0: off);
     other planners are refused."""

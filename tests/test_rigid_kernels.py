@@ -351,3 +351,54 @@ def test_the_sshape_seeing_points_is_the_step_loop(problems: list[Problem], one_
         if a.success:
             assert check_path(SShape(), p, a.path)
     assert same >= 10 and escapes > 0
+
+
+def test_back_off_is_the_step_loops(problems: list[Problem], one_torch_thread: None) -> None:
+    """The escape's back-off in the kernel against ``rollout._back_off`` on random paths
+    (the body and the ball), then whole rollouts: with escape draws of no spread each draw
+    is the mean action that just failed to move, so every escape step backs off; the
+    compiled plans are the step loop's, differ from those without the back-off, and every
+    success is certified."""
+    from dataclasses import replace
+
+    from pointplan.planners.rollout import ESCAPE_DEFAULTS, _back_off
+    from pointplan.robots.point import Sphere3D
+
+    rng = np.random.default_rng(4)
+    for robot, kind in ((SShape(), RK.BODY), (Sphere3D(), RK.BALL)):
+        scale = np.asarray(robot.action_scale, np.float64)
+        low, high = np.full(3, -1.0), np.full(3, 1.0)
+        fired = 0
+        for _ in range(30):
+            q = robot.sample_uniform(rng, 1, low, high)[0]
+            steps = rng.uniform(-1, 1, (6, len(scale))) * scale * rng.choice([0.3, 1.0, 3.0])
+            path = [q]
+            for tw in steps:
+                path.append(robot.integrate(path[-1][None], tw[None])[0])
+            path = np.stack(path[::-1])  # the last row is where the robot is
+            backoff = float(rng.choice([0.0, 0.03, 0.3, 10.0]))
+            ref = _back_off(robot, path[:-1], path[-1], backoff)
+            best = np.full(len(scale), 7.0, np.float32)
+            RK._back_off(kind, path, len(path) - 1, backoff, scale, np.empty(6), best)
+            if ref is None:
+                assert np.all(best == 7.0)
+            else:
+                fired += 1
+                np.testing.assert_allclose(best, ref, atol=1e-6)
+        assert 0 < fired < 30
+
+    esc = replace(ESCAPE_DEFAULTS["sshape"], noise=0.0, tries=2, lookahead=0)
+    plans = {}
+    for backoff in (0.0, 0.03):
+        for compiled in (True, False):
+            pl = make_planner(
+                "policy", SShape(), observation="local", compiled=compiled, escape=replace(esc, backoff=backoff)
+            )
+            plans[backoff, compiled] = [pl.plan(p) for p in problems[:12]]  # type: ignore[attr-defined]
+    same = sum(_same(a, b) for a, b in zip(plans[0.03, True], plans[0.03, False]))
+    assert same >= 11
+    assert any(not _same(a, b) for a, b in zip(plans[0.0, True], plans[0.03, True]))
+    for p, a in zip(problems[:12], plans[0.03, True]):
+        assert "compiled" in a.info["time_split"]
+        if a.success:
+            assert check_path(SShape(), p, a.path)

@@ -77,7 +77,7 @@ def test_options_are_validated_once() -> None:
     assert oriented.body == "sshape" and oriented.name != "sshape"
     assert RolloutOptions().escape_for(oriented) == ESCAPE_DEFAULTS["sshape-oriented"] != ESCAPE_DEFAULTS["sshape"]
     assert RolloutOptions().escape_for("sshape-oriented") == ESCAPE_DEFAULTS["sshape-oriented"]
-    assert RolloutOptions(escape=4).escape_for(oriented) == Escape(4, 2.0, 0.01, tries=64, lookahead=3)
+    assert RolloutOptions(escape=4).escape_for(oriented) == Escape(4, 2.0, 0.01, tries=64, lookahead=3, backoff=0.06)
     assert default_escape(make_robot("sshape")) == ESCAPE_DEFAULTS["sshape"]
     assert default_escape("no-such-robot") is None
     assert RolloutOptions().escape_for("disc2d").steps == 0
@@ -312,3 +312,71 @@ def test_lockstep_escape_draws_for_the_escaping_robots_alone() -> None:
     np.testing.assert_array_equal(steppers["all"].pending_checks[escaping], steppers["alone"].pending_checks)
     assert np.all(steppers["all"].pending_checks[~escaping] == 0) and np.all(steppers["alone"].pending_checks > 0)
     assert not np.array_equal(chosen[escaping], first[escaping])  # the escape chose other draws
+
+
+def test_escape_backs_off_where_every_draw_is_refused(one_torch_thread: None) -> None:
+    """Wedged in a Slot opening a fraction of a millimetre from a wall, every escape draw
+    is refused; with ``backoff`` the step heads back along the robot's own path instead:
+    the action toward the latest pose more than ``backoff`` away (recomputed here from the
+    robot's exponential map), the same in the one-robot stepper and the batched one, and
+    the plan it gives is certified by the evaluator (the compiled kernel's back-off:
+    tests/test_rigid_kernels.py)."""
+    from dataclasses import replace
+
+    from pointplan.envs.core import q_free
+    from pointplan.evaluation.evaluate import check_path
+    from pointplan.planners.rollout import _back_off, _Lockstep, _OneRobot
+
+    for bad in (-0.1, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="backoff"):
+            Escape(tries=8, backoff=bad)
+    sc = make_scenario("slot", robot="sshape-oriented")
+    robot = sc.robot
+    scale = np.asarray(robot.action_scale, np.float64)
+    # the helper: a pose within one step's reach is reached exactly; a far one in a step
+    # as long as the action box allows, in the same direction
+    p = sc.problem("val", 487, seed=1)  # frozen in the opening without the back-off
+    rng = np.random.default_rng(0)
+    q = robot.sample_uniform(rng, 1, p.scene.low, p.scene.high)[0]
+    near = robot.integrate(q[None], (0.3 * scale * rng.uniform(-1, 1, len(scale)))[None])[0]
+    far = robot.integrate(q[None], (4.0 * scale * rng.uniform(-1, 1, len(scale)))[None])[0]
+    past = np.stack([far, near, q])
+    a = _back_off(robot, past, q, 0.0)
+    assert a is not None and np.allclose(robot.integrate(q[None], (a * scale)[None])[0], near, atol=1e-5)
+    b = _back_off(robot, past, q, float(robot.distance(near[None], q[None])[0]) + 1e-6)
+    twist = np.asarray(robot.log(q[None], far[None]))[0] / scale
+    assert (
+        b is not None
+        and np.isclose(np.max(np.abs(b)), 1.0)
+        and np.allclose(b, twist / np.max(np.abs(twist)), atol=1e-5)
+    )
+    assert _back_off(robot, past, q, 1e3) is None
+
+    policy = Policy.from_checkpoint("src/pointplan/data/slot_sshape_oriented_local_policy.pt")
+    esc = replace(ESCAPE_DEFAULTS["sshape-oriented"], backoff=0.0)
+    stuck = PolicyPlanner(policy, robot=robot, escape=esc, compiled=False).plan(p)
+    assert not stuck.success and stuck.info["escapes"] > 0
+    path, wedged = stuck.path, stuck.path[-1]
+    if np.allclose(wedged, p.goal):  # (a failed plan's path ends where the rollout stopped)
+        path, wedged = path[:-1], path[-2]
+    eng = PolicyPlanner(policy, robot=robot, escape=replace(esc, backoff=0.03), compiled=False).engine
+    goal = np.asarray(p.goal, np.float64)
+    sp = _OneRobot(eng, p, np.random.default_rng(3), sampled=False)
+    obs = eng.observer.observe_one(wedged, u=eng._uniforms(10_000)[: eng.observer.draws_one()])
+    drawn = sp._furthest(obs, wedged, goal)  # no path: the best draw
+    tw = np.clip(np.asarray(drawn, np.float64), -1, 1) * scale
+    q1 = q_free(robot, p.scene.world, wedged[None], tw[None], p.scene.low[None], p.scene.high[None], eng.env.substep)[0]
+    assert float(robot.distance(q1, wedged[None])[0]) < 1e-3  # every draw refused
+    expected = _back_off(robot, path, wedged, 0.03)
+    assert expected is not None
+    sp = _OneRobot(eng, p, np.random.default_rng(3), sampled=False)
+    np.testing.assert_allclose(sp._furthest(obs, wedged, goal, path), expected, atol=1e-6)
+    lock = _Lockstep(eng.act, robot, eng.env, [p], np.random.default_rng(0), np.random.default_rng(1), 0.0, eng.escape)
+    lock.core.q[0] = wedged
+    lobs = lock.core.observe(np.random.default_rng(2))["observation"]
+    first = np.asarray(eng.act(lobs, lock.core.q.copy(), goal[None].copy(), noise=2.0 * np.ones((1, 6))), np.float32)
+    chosen = lock._furthest(lobs, goal[None].copy(), np.array([True]), first.copy(), path[:, None])
+    np.testing.assert_allclose(chosen[0], expected, atol=1e-6)
+
+    backed = PolicyPlanner(policy, robot=robot, escape=replace(esc, backoff=0.03)).plan(p)
+    assert backed.success and check_path(robot, p, backed.path)

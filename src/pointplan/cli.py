@@ -73,6 +73,17 @@ def positive_float(text: str) -> float:
     return value
 
 
+def non_negative_float(text: str) -> float:
+    """An argparse type: a finite number of at least 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not (np.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number of at least 0, got {text}")
+    return value
+
+
 #: Bi-RRT's node budget on the command line when --max-nodes is not given
 DEFAULT_MAX_NODES = 20000
 
@@ -251,7 +262,7 @@ def _check_checkpoint(args: argparse.Namespace, names: Sequence[str]) -> None:
         raise CLIError(f"--attempts is for --planner policy or hybrid, not {', '.join(names)}")
     if getattr(args, "escape", None) is not None and not any(n.lower() in POLICY_PLANNERS for n in names):
         raise CLIError(f"--escape is for --planner policy or hybrid, not {', '.join(names)}")
-    for flag in ("escape_tries", "escape_lookahead", "substep"):
+    for flag in ("escape_tries", "escape_lookahead", "escape_backoff", "substep"):
         if getattr(args, flag, None) is not None and not any(n.lower() in POLICY_PLANNERS for n in names):
             raise CLIError(f"--{flag.replace('_', '-')} is for --planner policy or hybrid, not {', '.join(names)}")
     if getattr(args, "dodge", None) is not None and not any(n.lower() in POLICY_PLANNERS for n in names):
@@ -331,11 +342,13 @@ def _planner(name: str, robot: Robot, args: argparse.Namespace, seed: int) -> Pl
         if getattr(args, "escape", None) is not None:
             kwargs["escape"] = args.escape
         tries, ahead = getattr(args, "escape_tries", None), getattr(args, "escape_lookahead", None)
-        if tries is not None or ahead is not None:
+        back = getattr(args, "escape_backoff", None)
+        if tries is not None or ahead is not None or back is not None:
             from .planners.rollout import RolloutOptions
 
             esc = RolloutOptions(escape=getattr(args, "escape", None)).escape_for(robot, tries)
-            kwargs["escape"] = esc if ahead is None else dataclasses.replace(esc, lookahead=ahead)
+            esc = esc if ahead is None else dataclasses.replace(esc, lookahead=ahead)
+            kwargs["escape"] = esc if back is None else dataclasses.replace(esc, backoff=back)
         if getattr(args, "substep", None) is not None:
             kwargs["substep"] = args.substep
         if getattr(args, "dodge", None) is not None:
@@ -435,6 +448,11 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
         "--escape-lookahead",
         type=non_negative_int,
         help="--planner policy or hybrid: judge each draw of a screened escape by where the mean action carries the robot in this many steps more from its end, the furthest taken; 0: by its own motion (default: the robot's)",
+    )
+    p.add_argument(
+        "--escape-backoff",
+        type=non_negative_float,
+        help="--planner policy or hybrid: where not one draw of a screened escape step moves the robot, head back instead toward the latest pose of its path more than this far away (geodesic distance); 0: off (default: the robot's: 0.03 for the S-shape told its orientation, off for the others)",
     )
     p.add_argument(
         "--substep",

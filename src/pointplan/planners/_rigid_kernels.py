@@ -75,7 +75,8 @@ _MOVED = 1e-3
     F_RANGE,
     F_SPACING,
     F_RADIUS,
-) = range(11)
+    F_BACKOFF,
+) = range(12)
 #: ``iparams`` of :func:`rollout_rigid`
 (
     I_HORIZON,
@@ -395,6 +396,34 @@ def _r_distance(kind, a, b, tmp):  # type: ignore[no-untyped-def]
 
 
 @_jit
+def _r_log(kind, a, b, out):  # type: ignore[no-untyped-def]
+    """The twist from ``a`` to ``b`` into ``out`` (the body's ``log(a^-1 b)``; the ball's
+    ``b - a``)."""
+    if kind == BODY:
+        _log(a, b, out)
+        return
+    for i in range(a.shape[0]):
+        out[i] = b[i] - a[i]
+
+
+@_jit
+def _back_off(kind, path, t, backoff, scale, tmp, best):  # type: ignore[no-untyped-def]
+    """The escape's back-off: ``best`` = the action from ``path[t]`` toward the latest of
+    ``path[:t]`` more than ``backoff`` away, shortened into the action box (as
+    ``rollout._back_off``); ``best`` untouched where none is that far."""
+    q = path[t]
+    for j in range(t - 1, -1, -1):
+        if _r_distance(kind, path[j], q, tmp) > backoff:
+            _r_log(kind, q, path[j], tmp)
+            big = 1.0
+            for i in range(best.shape[0]):
+                big = max(big, abs(tmp[i] / scale[i]))
+            for i in range(best.shape[0]):
+                best[i] = np.float32(tmp[i] / scale[i] / big)
+            return
+
+
+@_jit
 def _finish(kind, end, path, t, goal, greedy, connect, resolution, low, high, radius, body, boxes, ws):  # type: ignore[no-untyped-def]
     """The end of a rollout that stopped at ``path[t]`` with code ``end``: the goal test
     there (``greedy``), the edge to the goal from within the tolerance (``connect``), the
@@ -429,7 +458,7 @@ def _furthest(  # type: ignore[no-untyped-def]
     ``drawn``, scaled by ``sd``), each moved from ``q`` into ``cand`` as far as it is
     free, then (``I_LOOKAHEAD`` steps) followed by the mean action (:func:`_ahead`); the
     one that went furthest is left in ``best`` (the first of equals). Returns the motion
-    checks of all the draws and the next row of ``normals``."""
+    checks of all the draws, the next row of ``normals`` and how far the best went."""
     kind, adim, radius = iparams[I_ROBOT], iparams[I_ACTION_DIM], fparams[F_RADIUS]
     far, checks = -1.0, 0
     drew = np.empty(adim, np.float32)
@@ -458,7 +487,7 @@ def _furthest(  # type: ignore[no-untyped-def]
             far = d
             for i in range(adim):
                 best[i] = drew[i]
-    return checks, drawn
+    return checks, drawn, far
 
 
 @_jit
@@ -563,11 +592,13 @@ def rollout_rigid(  # type: ignore[no-untyped-def]
         noisy = escaping or sampled
         u = stream[t * blk : (t + 1) * blk]
         if escaping and iparams[I_TRIES] > 1:
-            c, drawn = _furthest(
+            c, drawn, far = _furthest(
                 q, goal, u, stream[:blk], noise, normals, drawn, fparams[F_ESC_NOISE], rays, rboxes, pts, nrm, low, high,
                 boxes, body, fparams, iparams, scale, wflat, layout, ows, nws, ws, tw, path[t + 1], tmp, best,
             )  # fmt: skip
             checks += c
+            if fparams[F_BACKOFF] > 0 and far < _MOVED:  # not one draw moves: back off along the path
+                _back_off(kind, path, t, fparams[F_BACKOFF], scale, tmp, best)
         else:
             if noisy:
                 sd = fparams[F_ESC_NOISE] if escaping else fparams[F_NOISE]

@@ -316,7 +316,7 @@ class CompiledRays:
         """The kernel's ``fparams`` and ``iparams`` for an attempt."""
         eng = self.engine
         opts, esc, env, observer = eng.options, eng.escape, eng.env, eng.observer
-        fparams = np.zeros(11)
+        fparams = np.zeros(12)
         fparams[[RK.F_SUBSTEP, RK.F_GOAL_TOL, RK.F_STALL_DIST, RK.F_RESOLUTION, RK.F_S0]] = (
             env.substep,
             env.goal_tolerance,
@@ -332,6 +332,7 @@ class CompiledRays:
             observer.spacing,
             float(getattr(eng.robot, "radius", 0.0)),
         )
+        fparams[RK.F_BACKOFF] = esc.backoff
         iparams = np.zeros(15, np.int64)
         iparams[:] = (
             eng.horizon,
