@@ -130,9 +130,9 @@ def test_network_is_the_numpy_actor(planner: object, problems: list[Problem]) ->
     nws = _workspace(observer.n_points, layout, 6)
     ows4 = RK._obs_scratch(len(compiled.rays[0]), len(rboxes[0]))
     ows = (*ows4, np.empty((observer.n_points, 6), np.float32), np.empty(observer.n_points, np.int64))
-    fparams = np.zeros(11)
+    fparams = np.zeros(RK.F_BACKOFF + 1)
     fparams[[RK.F_S0, RK.F_RANGE, RK.F_SPACING]] = 0.07, observer.max_range, observer.spacing
-    iparams = np.zeros(13, np.int64)
+    iparams = np.zeros(RK.I_AXES + 1, np.int64)
     iparams[RK.I_ACTION_DIM], iparams[RK.I_ROBOT] = 6, RK.BODY
     robot = SShape()
     for q in _free_configs(problems[0], 10, 5):
@@ -402,3 +402,45 @@ def test_back_off_is_the_step_loops(problems: list[Problem], one_torch_thread: N
         assert "compiled" in a.info["time_split"]
         if a.success:
             assert check_path(SShape(), p, a.path)
+
+
+def test_the_sshape_told_its_orientation_is_the_step_loop(one_torch_thread: None) -> None:
+    """The S-shape told its orientation (the world's axes in the body frame beside the goal
+    twist, ``I_AXES``) takes the compiled rollout: its goal input and action are the numpy
+    actor's, and its Slot plans (the back-off, 64 draws and the lookahead of its default
+    escape, sub-steps of 0.005) are the step loop's, every success certified."""
+    from pointplan.models.inputs import goal_input
+    from pointplan.robots.sshape import OrientedSShape
+
+    sc = make_scenario("slot", robot="sshape-oriented")
+    robot = sc.robot
+    assert isinstance(robot, OrientedSShape)
+    fast_planner = make_planner("policy", robot, scene="slot")
+    ref = make_planner("policy", robot, scene="slot", compiled=False)
+    eng = fast_planner.engine  # type: ignore[attr-defined]
+    compiled = eng.compiled_rays()
+    assert isinstance(compiled, CompiledRays) and compiled.axes
+    problems = sc.problems("val", 10, seed=5)
+    boxes, rboxes, pts, nrm, low, high = compiled._scene_inputs(problems[0].scene)
+    fast = eng.fast
+    wflat, layout = pack_weights(fast.inp, fast.hidden, fast.head)
+    nws = _workspace(eng.observer.n_points, layout, 15)
+    ows4 = RK._obs_scratch(len(compiled.rays[0]), len(rboxes[0]))
+    ows = (*ows4, np.empty((eng.observer.n_points, 6), np.float32), np.empty(eng.observer.n_points, np.int64))
+    fparams, iparams = compiled._params(False)
+    rng = np.random.default_rng(1)
+    for p in problems[:4]:
+        q, goal = np.asarray(p.start, np.float64), np.asarray(p.goal, np.float64)
+        u = rng.random(len(compiled.rays[0]) + eng.observer.n_points)
+        a = RK._act(q, goal, u, np.zeros(6, np.float32), False, compiled.rays, rboxes, pts, nrm, low, high, fparams,
+                    iparams, compiled.scale, wflat, layout, ows, nws).copy()  # fmt: skip
+        np.testing.assert_allclose(a, fast(ows[4].copy(), goal_input(robot, q, goal), None), rtol=0, atol=2e-6)
+    same = solved = 0
+    for p in problems:
+        a, b = fast_planner.plan(p), ref.plan(p)  # type: ignore[attr-defined]
+        assert "compiled" in a.info["time_split"] and "compiled" not in b.info["time_split"]
+        same += _same(a, b)
+        if a.success:
+            solved += 1
+            assert check_path(robot, p, a.path)
+    assert same >= len(problems) - 1 and solved >= len(problems) // 2

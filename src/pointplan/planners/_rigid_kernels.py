@@ -94,7 +94,8 @@ _MOVED = 1e-3
     I_OBS,
     I_TRIES,
     I_LOOKAHEAD,
-) = range(15)
+    I_AXES,
+) = range(16)
 #: ``I_ROBOT``: a translating ball, or a free-flying body of boxes
 BALL, BODY = 0, 1
 #: ``I_OBS``: what the robot sees: rays (``local``), or a subset of the scene's points (``global``)
@@ -332,7 +333,9 @@ def _act(  # type: ignore[no-untyped-def]
 ):
     """The action (float32 ``(action_dim,)``, a view into ``nws``) at ``q`` toward ``goal``
     for the draws ``u``: the observation, the goal input ``log(q^-1 goal) / scale``
-    (``(goal - q) / scale`` for a ball), the network."""
+    (``(goal - q) / scale`` for a ball; with ``I_AXES``, followed by the body's rotation
+    matrix row by row: the world's axes in the body frame, the S-shape told its
+    orientation), the network."""
     kind = iparams[I_ROBOT]
     h = nws[0]
     vec = nws[4]
@@ -358,6 +361,13 @@ def _act(  # type: ignore[no-untyped-def]
         _log(q, goal, g)
         for i in range(gdim):
             z[i] = np.float32(g[i] / scale[i])
+        if iparams[I_AXES] != 0:
+            rot = np.empty((3, 3))
+            _rotation(q, rot)
+            for i in range(3):
+                for j in range(3):
+                    z[gdim + 3 * i + j] = np.float32(rot[i, j])
+            gdim += 9
     return _network(nws, wflat, layout, gdim, iparams[I_ACTION_DIM], noise, sampled)
 
 
@@ -571,7 +581,7 @@ def rollout_rigid(  # type: ignore[no-untyped-def]
     ws = _scratch(body[0].shape[0], boxes[0].shape[0])
     o4 = _obs_scratch(nr, rboxes[0].shape[0])
     ows = (o4[0], o4[1], o4[2], o4[3], np.empty((n_points, 6), np.float32), np.empty(n_points, np.int64))
-    nws = _workspace(n_points, layout, adim)
+    nws = _workspace(n_points, layout, adim + (9 if iparams[I_AXES] != 0 else 0))  # (room for the goal input)
     noise = np.zeros(adim, np.float32)
     best = np.empty(adim, np.float32)  # the step's action
     tw = np.empty(adim)

@@ -28,6 +28,7 @@ import numpy as np
 from ..geometry.shapes import Box
 from ..observers.rays import LocalRays, WideRays
 from ..robots.point import Disc2D, Sphere3D
+from ..robots.sshape import OrientedSShape
 from ..scenes.scene import Problem, Scene
 from . import _policy_kernels as K
 from . import _rigid_kernels as RK
@@ -240,6 +241,8 @@ class CompiledRays:
         self.scale = np.ascontiguousarray(robot.action_scale, np.float64)
         self._scene: Scene | None = None
         self._scene_args: tuple[Any, ...] | None = None
+        #: the goal input carries the world's axes in the body frame (``I_AXES``)
+        self.axes = False
 
     @classmethod
     def build(cls, engine: EngineView) -> CompiledRays | None:
@@ -267,17 +270,25 @@ class CompiledRays:
         else:
             return None
         width, adim = fast.inp[0].shape[1], robot.twist_dim
+        # the goal input beside the twist: nothing, or the world's axes in the body frame
+        axes = isinstance(robot, OrientedSShape) and kind == RK.BODY
+        if robot.state_feature_dim != (9 if axes else 0):
+            return None
         if (
             any(w.shape != (width, width) for w, _ in fast.hidden)
-            or fast.head[0][0].shape[0] != width + adim
+            or fast.head[0][0].shape[0] != width + adim + robot.state_feature_dim
             or fast.action_dim != adim
         ):
             return None
         if fast.inp[0].shape[0] != 6 or robot.dim != 3:
             return None
-        if not rays:
-            return cls(engine, kind, body, None)
-        return cls(engine, kind, body, (f(observer.body_origins, np.float64), f(observer.body_dirs, np.float64)))
+        made = (
+            cls(engine, kind, body, None)
+            if not rays
+            else cls(engine, kind, body, (f(observer.body_origins, np.float64), f(observer.body_dirs, np.float64)))
+        )
+        made.axes = axes
+        return made
 
     def _scene_inputs(self, scene: Scene) -> tuple[Any, ...] | None:
         """The obstacles of ``scene`` as the kernel takes them (its boxes; for the S-shape
@@ -333,7 +344,7 @@ class CompiledRays:
             float(getattr(eng.robot, "radius", 0.0)),
         )
         fparams[RK.F_BACKOFF] = esc.backoff
-        iparams = np.zeros(15, np.int64)
+        iparams = np.zeros(16, np.int64)
         iparams[:] = (
             eng.horizon,
             int(opts.stall_steps or 0),
@@ -350,6 +361,7 @@ class CompiledRays:
             self.sees,
             esc.tries,
             esc.lookahead,
+            int(self.axes),
         )
         return fparams, iparams
 
