@@ -62,26 +62,25 @@ def positive_int(text: str) -> int:
     return _int_at_least(text, 1, "at least 1")
 
 
-def positive_float(text: str) -> float:
-    """An argparse type: a finite number above 0."""
+def _finite_float(text: str, zero: bool) -> float:
+    """A finite number above 0 (or, with ``zero``, of at least 0), for argparse."""
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
-    if not (np.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a number above 0, got {text}")
+    if not (np.isfinite(value) and (value >= 0 if zero else value > 0)):
+        raise argparse.ArgumentTypeError(f"must be a finite number {'of at least' if zero else 'above'} 0, got {text}")
     return value
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a finite number above 0."""
+    return _finite_float(text, zero=False)
 
 
 def non_negative_float(text: str) -> float:
     """An argparse type: a finite number of at least 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
-    if not (np.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number of at least 0, got {text}")
-    return value
+    return _finite_float(text, zero=True)
 
 
 #: Bi-RRT's node budget on the command line when --max-nodes is not given
@@ -452,7 +451,7 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
     p.add_argument(
         "--escape-backoff",
         type=non_negative_float,
-        help="--planner policy or hybrid: where not one draw of a screened escape step moves the robot, head back instead toward the latest pose of its path more than this far away (geodesic distance); 0: off (default: the robot's: 0.03 for the S-shape told its orientation, off for the others)",
+        help="--planner policy or hybrid: where not one draw of a screened escape step moves the robot, head back instead toward the latest pose of its path more than this far away (geodesic distance); 0: off (default: the robot's: 0.06 for the S-shape told its orientation, off for the others)",
     )
     p.add_argument(
         "--substep",

@@ -275,8 +275,8 @@ def _workspace(n_points, layout, d):  # type: ignore[no-untyped-def]
     row and the point's features, then the head's input row and two ping-pong rows)."""
     width, features = layout[0], layout[1]
     head = width + d
-    for li in range(layout[3]):
-        head = max(head, layout[5 + 2 * li])
+    for li in range(layout[3]):  # each head layer's input and output rows
+        head = max(head, layout[4 + 2 * li], layout[5 + 2 * li])
     h = np.empty((n_points, width), np.float32)
     y = np.empty((n_points, width), np.float32)
     tmp, ki = np.empty(_ELU_BLOCK, np.float32), np.empty(_ELU_BLOCK, np.int32)

@@ -581,7 +581,7 @@ def rollout_rigid(  # type: ignore[no-untyped-def]
     ws = _scratch(body[0].shape[0], boxes[0].shape[0])
     o4 = _obs_scratch(nr, rboxes[0].shape[0])
     ows = (o4[0], o4[1], o4[2], o4[3], np.empty((n_points, 6), np.float32), np.empty(n_points, np.int64))
-    nws = _workspace(n_points, layout, adim + (9 if iparams[I_AXES] != 0 else 0))  # (room for the goal input)
+    nws = _workspace(n_points, layout, adim)
     noise = np.zeros(adim, np.float32)
     best = np.empty(adim, np.float32)  # the step's action
     tw = np.empty(adim)

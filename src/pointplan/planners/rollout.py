@@ -95,12 +95,12 @@ class Escape:
     whose lookahead ends furthest from where the robot is is taken (one whose lookahead
     arrives at the goal first); 0: each draw's own motion decides.
 
-    ``backoff``: with several draws (one draw: no effect), where not one of them takes the robot anywhere (every
-    move refused: the body wedged against a wall a fraction of a millimetre away, where
-    each draw presses on), the step heads instead back toward the latest pose of the
-    robot's own path more than ``backoff`` away (geodesic distance; the action toward it,
-    shortened into the action box, and its move checked like any other); the next escape
-    steps draw again from there. 0: off."""
+    ``backoff``: with several draws (one draw: no effect), where not one of them takes the
+    robot anywhere (every move refused: the body wedged against a wall a fraction of a
+    millimetre away, where each draw presses on), the step heads instead back toward the
+    latest pose of the robot's own path more than ``backoff`` away (geodesic distance; the
+    action toward it, shortened into the action box, and its move checked like any other);
+    the next escape steps draw again from there. 0: off."""
 
     steps: int = 10
     noise: float = 2.0

@@ -230,7 +230,12 @@ class CompiledRays:
     loop, which goes on from where it starts. Made by :meth:`build`."""
 
     def __init__(
-        self, engine: EngineView, kind: int, body: tuple[np.ndarray, ...], rays: tuple[np.ndarray, ...] | None
+        self,
+        engine: EngineView,
+        kind: int,
+        body: tuple[np.ndarray, ...],
+        rays: tuple[np.ndarray, ...] | None,
+        axes: bool = False,
     ) -> None:
         self.engine = engine
         fast, robot = engine.fast, engine.robot
@@ -242,7 +247,7 @@ class CompiledRays:
         self._scene: Scene | None = None
         self._scene_args: tuple[Any, ...] | None = None
         #: the goal input carries the world's axes in the body frame (``I_AXES``)
-        self.axes = False
+        self.axes = axes
 
     @classmethod
     def build(cls, engine: EngineView) -> CompiledRays | None:
@@ -282,13 +287,8 @@ class CompiledRays:
             return None
         if fast.inp[0].shape[0] != 6 or robot.dim != 3:
             return None
-        made = (
-            cls(engine, kind, body, None)
-            if not rays
-            else cls(engine, kind, body, (f(observer.body_origins, np.float64), f(observer.body_dirs, np.float64)))
-        )
-        made.axes = axes
-        return made
+        seen = (f(observer.body_origins, np.float64), f(observer.body_dirs, np.float64)) if rays else None
+        return cls(engine, kind, body, seen, axes)
 
     def _scene_inputs(self, scene: Scene) -> tuple[Any, ...] | None:
         """The obstacles of ``scene`` as the kernel takes them (its boxes; for the S-shape
