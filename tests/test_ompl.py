@@ -122,3 +122,57 @@ def test_sphere_and_sshape_spaces() -> None:
     assert res.success, res.info
     assert res.path.shape[1] == 7
     assert check_path(ss, p3, res.path)
+
+
+def test_first_query_checks_before_the_budget_and_does_not_count_it(
+    narrow: list[Problem], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A planner's first query on a kind of world makes one state check and one short edge
+    toward the goal before OMPL's clock starts (compiling the kernels is not planning
+    time); the query's ``collision_checks`` counts only OMPL's own checks, and later
+    queries on the same kind of world make none."""
+    from pointplan.planners import ompl as ompl_mod
+
+    calls: list[tuple[str, int]] = []
+    edges: list[tuple[np.ndarray, np.ndarray]] = []
+    real_free, real_edge = ompl_mod.check_free, ompl_mod.edge_free
+
+    def counted_free(robot, world, q, low, high):  # type: ignore[no-untyped-def]
+        calls.append(("state", len(q)))
+        return real_free(robot, world, q, low, high)
+
+    def counted_edge(robot, world, q0, q1, resolution, low, high):  # type: ignore[no-untyped-def]
+        ok, n = real_edge(robot, world, q0, q1, resolution, low, high)
+        calls.append(("edge", n))
+        edges.append((np.array(q0), np.array(q1)))
+        return ok, n
+
+    monkeypatch.setattr(ompl_mod, "check_free", counted_free)
+    monkeypatch.setattr(ompl_mod, "edge_free", counted_edge)
+    robot = Narrow2DScenario().robot
+    planner = make_planner("ompl:RRTConnect", robot, time_limit=2.0, seed=3)
+    problem = narrow[0]
+
+    low, high = np.asarray(problem.scene.low, np.float64), np.asarray(problem.scene.high, np.float64)
+    planner._warm_up(problem, low, high)
+    assert [c[0] for c in calls] == ["state", "edge"]
+    q0, q1 = edges[0]
+    assert np.allclose(q0, problem.start)
+    step = q1 - q0
+    toward = np.asarray(problem.goal) - np.asarray(problem.start)
+    assert np.isclose(np.linalg.norm(step), 2 * planner.resolution)
+    assert np.isclose(step @ toward, np.linalg.norm(step) * np.linalg.norm(toward))  # toward the goal
+    calls.clear()
+    planner._warm_up(problem, low, high)  # the same kind of world: nothing more
+    assert calls == []
+
+    fresh = make_planner("ompl:RRTConnect", robot, time_limit=2.0, seed=3)
+    result = fresh.plan(problem)
+    assert result.success
+    made = sum(n for _, n in calls)
+    warm = calls[0][1] + calls[1][1]  # the first state check and the first edge
+    assert [c[0] for c in calls[:2]] == ["state", "edge"]
+    assert result.collision_checks == made - warm
+    calls.clear()
+    again = fresh.plan(problem)
+    assert again.collision_checks == sum(n for _, n in calls)
