@@ -1,5 +1,6 @@
 """Every relative link in the project's Markdown resolves: the file exists, and where the link
-names a heading (``page.md#anchor``), that page has the heading.
+names a heading (``page.md#anchor``), that page has the heading. Every repository file the
+text names in inline code (``docs/data/x.json``) exists.
 
 Links and headings are read with markdown-it (CommonMark), so links inside code are not
 links; a heading's anchor is made as GitHub makes it (the heading's text, lower case,
@@ -109,3 +110,38 @@ def test_broken_links_are_found(tmp_path: Path) -> None:
 @pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(REPO)) for p in PAGES])
 def test_links_resolve(page: Path) -> None:
     assert broken_links(page) == []
+
+
+REPO_PATH = re.compile(r"^(src|docs|checkpoints|scripts|benchmarks|experiments|examples|tests)/[\w./-]*$")
+#: options whose value is a file a command writes, not one the repository has
+WRITES = {"-o", "--out", "--json", "--figure", "--plot", "--run-dir", "--runs"}
+
+
+def missing_files(page: Path) -> list[str]:
+    """Repository paths the page names in inline code (``docs/data/x.json``) that do not
+    exist; a path written by a command (``-o docs/img/x``) or with a pattern in it is not
+    checked."""
+    missing = []
+    for tok in _tokens(page):
+        for child in tok.children or []:
+            if child.type != "code_inline":
+                continue
+            words = child.content.split()
+            for i, word in enumerate(words):
+                word = word.strip("(),;:'\"")
+                if i and words[i - 1] in WRITES:
+                    continue
+                if REPO_PATH.match(word) and not any(c in word for c in "{<*") and not (REPO / word).exists():
+                    missing.append(word)
+    return missing
+
+
+def test_missing_files_are_found(tmp_path: Path) -> None:
+    page = tmp_path / "p.md"
+    page.write_text("`docs/results/README.md`, `docs/no_such.json`, `cmd -o docs/img/new`, `docs/{a,b}.csv`\n")
+    assert missing_files(page) == ["docs/no_such.json"]
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(REPO)) for p in PAGES])
+def test_named_files_exist(page: Path) -> None:
+    assert missing_files(page) == []
