@@ -673,3 +673,16 @@ def test_eval_says_which_shipped_policy_it_runs(tmp_path: Path, capsys: pytest.C
         == 0
     )
     assert "shipped policy" not in capsys.readouterr().out
+
+
+def test_env_help_names_every_scenario() -> None:
+    """``--env``'s help, written out so that ``--help`` imports no scenario, names every
+    scenario ``make_scenario`` knows (MotionBenchMaker's by their scenario names)."""
+    from pointplan.cli import ENV_NAMES, build_parser
+    from pointplan.scenes.registry import scenario_names
+
+    words = set(ENV_NAMES.replace(",", " ").replace("(", " ").replace(")", " ").split())
+    for name in scenario_names():
+        assert name.removeprefix("mbm-") in words, name
+    help_text = " ".join(build_parser().commands["eval"].format_help().split())
+    assert "mbm-<scenario>" in help_text and "slotclassic" in help_text

@@ -145,3 +145,15 @@ def test_missing_files_are_found(tmp_path: Path) -> None:
 @pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(REPO)) for p in PAGES])
 def test_named_files_exist(page: Path) -> None:
     assert missing_files(page) == []
+
+
+def test_docs_the_package_names_exist() -> None:
+    """The Markdown pages the package's help texts and docstrings point users to exist (a
+    path in a git revision, ``REV:docs/x.md``, is history, not a pointer)."""
+    named = {
+        m.group(0)
+        for src in (REPO / "src" / "pointplan").rglob("*.py")
+        for m in re.finditer(r"(?<![:\w/])docs/[\w/.-]+\.md", src.read_text(encoding="utf-8"))
+    }
+    assert len(named) > 3
+    assert sorted(n for n in named if not (REPO / n).exists()) == []

@@ -379,13 +379,27 @@ def _write_json(path: str | None, payload: dict[str, Any]) -> None:
         print(f"wrote {path}")
 
 
-def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> None:
+#: what ``--env`` takes (:func:`pointplan.scenes.registry.scenario_names`, which the CLI's
+#: tests hold this to; written out so that ``--help`` imports no scenario)
+ENV_NAMES = (
+    "narrow2d (2D-Narrow; variants narrow2d-ends, narrow2d-many, narrow2d-narrow, narrow2d-manynarrow), empty2d, "
+    "boxes3d, synthetic3d, ycb3d, dynamic3d, qureshi3d, cluttered3d, slot (the paper's Slot), slotmoving, slotwide, "
+    "slotclassic, armcells (an arm's random workcells), mbm-<scenario> (MotionBenchMaker: table_pick, "
+    "table_under_pick, box, bookshelf_small, bookshelf_tall, bookshelf_thin, cage)"
+)
+
+
+def _add_common(
+    p: argparse.ArgumentParser,
+    planner_default: str = "birrt",
+    seed_help: str = "problem-set seed, 0 or more (default: %(default)s)",
+) -> None:
     p.add_argument(
         "--env",
         default="narrow2d",
-        help="scenario: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d, cluttered3d (default: narrow2d)",
+        help=f"scenario: {ENV_NAMES} (default: narrow2d)",
     )
-    p.add_argument("--scene", help="plan on a scene file (JSON, see docs/scenes.md) instead of --env")
+    p.add_argument("--scene", help="plan on a scene file (JSON, see docs/guide/scene-files.md) instead of --env")
     p.add_argument(
         "--robot",
         help="sphere3d, sshape or sshape-oriented (the S-shape told its orientation) for the 3D scenarios (default: sphere3d; sshape for slot), panda or ur5 for mbm-* and armcells, or the robot of a scene file that names none",
@@ -463,9 +477,7 @@ def _add_common(p: argparse.ArgumentParser, planner_default: str = "birrt") -> N
         type=non_negative_int,
         help="--planner policy or hybrid, among moving obstacles: an action whose move would meet them where their last step's motion carries them is replaced by the nearest of standing still and this many sampled actions that does not; 0 turns it off (default: 16, chosen on validation of 3D-Dynamic)",
     )
-    p.add_argument(
-        "--seed", type=non_negative_int, default=0, help="problem-set seed, 0 or more (default: %(default)s)"
-    )
+    p.add_argument("--seed", type=non_negative_int, default=0, help=seed_help)
 
 
 # ---------------------------------------------------------------------------- commands
@@ -1562,7 +1574,7 @@ def _add_net(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--env",
         default="narrow2d",
-        help="scenario to train on: narrow2d, boxes3d, synthetic3d, ycb3d, dynamic3d, slot, qureshi3d, cluttered3d, armcells (an arm's workcells) (default: %(default)s)",
+        help=f"scenario to train on: {ENV_NAMES} (default: %(default)s)",
     )
     p.add_argument(
         "--robot",
@@ -1622,16 +1634,16 @@ def _add_scale(p: argparse.ArgumentParser, what: str = "problems are planned by"
     )
     p.add_argument(
         "--address",
-        help="an existing Ray cluster to run the workers on (e.g. auto, or ray://head:10001; see docs/scaling.md)",
+        help="an existing Ray cluster to run the workers on (e.g. auto, or ray://head:10001; see docs/guide/scaling.md)",
     )
 
 
 CLAIMS_EPILOG = (
-    "Every returned path is re-checked by the evaluator (exact clearance along each segment, docs/design.md), and a "
+    "Every returned path is re-checked by the evaluator (exact clearance along each segment, docs/reference/design.md), and a "
     "problem counts as solved only if that check passes. 'claims disagree' (planner_claims_disagree in the JSON) counts the problems where the "
     "planner's own verdict (it says it solved the problem, or that it did not) differs from the check: a planner "
     "that claims a path the check finds in collision or short of the goal, or one that gives up on a path that "
-    "is in fact valid. It should be 0; see docs/results.md. 'start/goal in collision' (invalid_problems) counts problems that "
+    "is in fact valid. It should be 0; see docs/results/README.md. 'start/goal in collision' (invalid_problems) counts problems that "
     "cannot be solved as posed."
 )
 
@@ -1658,7 +1670,10 @@ def _add_eval_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
 
 def _add_render_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
     p = _subparser(sub, "render", "draw a test problem, what the robot observes and a planner's path to a PNG")
-    _add_common(p)
+    _add_common(
+        p,
+        seed_help="which test problem, by its index (0 or more), and the seed of the planner and of the drawn points (default: %(default)s)",
+    )
     p.add_argument(
         "--n-points",
         type=positive_int,
@@ -1673,7 +1688,10 @@ def _add_view_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
     p = _subparser(
         sub, "view", "show a 3D test problem and a planner's path in the browser (pip install 'pointplan[viewer]')"
     )
-    _add_common(p)
+    _add_common(
+        p,
+        seed_help="which test problem, by its index (0 or more), and the seed of the planner and of the drawn points (default: %(default)s)",
+    )
     p.add_argument(
         "--n-points",
         type=positive_int,
@@ -1768,7 +1786,9 @@ def _add_train_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
         default=None,
         help="Ray rollout workers stepping the --num-envs environments (shared out among them) while this process learns (pip install 'pointplan[ray]'; default: one process)",
     )
-    p.add_argument("--address", help="an existing Ray cluster to run the rollout workers on (see docs/scaling.md)")
+    p.add_argument(
+        "--address", help="an existing Ray cluster to run the rollout workers on (see docs/guide/scaling.md)"
+    )
     p.add_argument(
         "--sync-every",
         type=positive_int,
@@ -1785,7 +1805,9 @@ def _add_bc_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
     p = _subparser(sub, "bc", "behavioural cloning from Bi-RRT demonstrations, optionally followed by DAgger rounds")
     _add_net(p)
     add_config_options(p, DaggerConfig(), BC_OPTIONS)
-    p.add_argument("--address", help="an existing Ray cluster to plan the demonstrations on (see docs/scaling.md)")
+    p.add_argument(
+        "--address", help="an existing Ray cluster to plan the demonstrations on (see docs/guide/scaling.md)"
+    )
     p.add_argument(
         "--dagger-rounds",
         type=non_negative_int,

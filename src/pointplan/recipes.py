@@ -295,7 +295,7 @@ RECIPES: dict[str, Recipe] = {
                 "shipped template), the local clone with its spread (40 epochs, separate encoders: checkpoints/slotmoving_local_bc_threading.pt), then PPO "
                 "with the reverse curriculum and the greedy goal test (docs/guide/training.md, 'A reverse curriculum'; docs/notebook/slot.md; "
                 "checkpoints/README.md). The shipped file is the curriculum's best by validation with the escape, at 307,200 steps. The clone's "
-                "command (--problems 2927, as its bc_config says) is the one of the earlier docs/learning.md (git show 9dc8483^:docs/learning.md); "
+                "command (--problems 2927, as its bc_config says) is the one of the earlier learning guide (git show 9dc8483^:docs/learning.md); "
                 "the current docs give its settings in words. The curriculum run (ppo_config: --steps 20000000) went on to 860,160 steps without a "
                 "better validation; its branch with --lr 3e-5 from 307,200 steps is checkpoints/slotmoving_local_ppo_curriculum_last.pt. Here --steps "
                 "stops it at the shipped step. The scene was named slot then (slotmoving since the paper's reading, the fixed gate, took the name); "

@@ -60,7 +60,7 @@ def connect(workers: int | None = None, address: str | None = None) -> Any:
     # would keep Ray from using the workers it prestarts (2-3 s more before the first task).
     kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": "warning", "log_to_driver": True}
     if address:
-        # the cluster's nodes must have pointplan installed (docs/scaling.md)
+        # the cluster's nodes must have pointplan installed (docs/guide/scaling.md)
         try:
             with warnings.catch_warnings():  # the client's own warning says what NoCluster says
                 warnings.filterwarnings("ignore", message="Ray Client connection timed out")

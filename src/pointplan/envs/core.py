@@ -48,7 +48,7 @@ class EnvConfig:
     reward_success: float = 20.0
     #: weight of the action's norm in the reward (the paper: 1). Lower it for the 6-DoF
     #: S-shape: with weight 1, 46% of Bi-RRT's S-shape solutions in 3D-Boxes earn less than
-    #: standing still for the whole episode (docs/guide/training.md, "Action cost")
+    #: standing still for the whole episode (docs/notebook/sshape.md, "The action cost")
     action_cost: float = 1.0
     #: a move that would leave the workspace: ``clip`` sends it to its end clipped into the
     #: bounds (sliding along the border, checked); ``stop`` ends it at the border

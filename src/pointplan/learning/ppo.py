@@ -2,7 +2,7 @@
 
 SAC improves the actor along its critics' action gradient; for the cloned S-shape those
 critics ranked actions worse than chance draws from the actor itself, and every actor that
-followed them lost its cloned skill (docs/learning.md, "The S-shape"). PPO needs no
+followed them lost its cloned skill (docs/notebook/sshape.md). PPO needs no
 action gradient from a critic: it raises the probability of the sampled actions whose
 return beat a state-value baseline, so a critic's error costs variance, not direction.
 The actor starts from a cloned one (``init_actor``), whose sampled policy already solves
@@ -95,8 +95,8 @@ class PPOConfig:
     #: end an episode as solved once the straight edge to the goal is certified free, as the
     #: planner does (``PolicyPlanner(greedy_goal=True)``; static scenes); validation too
     greedy_goal: bool = False
-    #: a demonstrations file (``pointplan bc --save-demos``, or ``scripts/slot_expert.py demos
-    #: demos``) of this scenario: a share of the episodes start on its paths, a few steps
+    #: a demonstrations file (the one ``pointplan bc --demos FILE`` plans where FILE is
+    #: missing, or ``scripts/slot_expert.py demos --save-demos FILE``) of this scenario: a share of the episodes start on its paths, a few steps
     #: before their goal, and further back as they succeed (a reverse curriculum)
     start_demos: str = ""
     #: the share of episodes started on a demonstration (the rest: fresh problems)

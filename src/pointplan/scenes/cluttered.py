@@ -120,7 +120,7 @@ class ClutteredConfig:
     thickness: float = 0.03
     #: start and goal positions at least this far apart
     min_goal_distance: float = 0.4
-    #: pairs drawn per problem before one whose straight line is free is accepted
+    #: pairs drawn per problem; the first whose straight line is blocked is kept (else the first pair)
     problem_tries: int = 12
     #: an outside end keeps this far from the furniture's hull
     hull_margin: float = 0.02

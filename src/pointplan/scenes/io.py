@@ -1,6 +1,6 @@
 """The scene file format: obstacles, bounds, an optional robot and planning problems in JSON.
 
-A scene file looks like this (2D; see ``docs/scenes.md`` for every field)::
+A scene file looks like this (2D; see ``docs/guide/scene-files.md`` for every field)::
 
     {
       "format": "pointplan-scene",

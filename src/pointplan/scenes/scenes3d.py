@@ -187,7 +187,8 @@ class YCB3DScenario(Scenario3D):
 class Dynamic3DScenario(Scenario3D):
     """3D-Dynamic: 3D-Boxes whose boxes move between two placements drawn from the same
     layout (centre and orientation), there and back over ``period`` steps (default: the
-    horizon; twice the horizon is one way, the second placement reached at the horizon)."""
+    horizon, so the second placement is reached at half the horizon and the first again
+    at its end)."""
 
     name = "dynamic3d"
 
