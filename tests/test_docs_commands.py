@@ -16,19 +16,10 @@ from pathlib import Path
 
 import pytest
 
+from test_docs_links import PAGES, REPO  # the same pages
+
 markdown_it = pytest.importorskip("markdown_it")
 
-REPO = Path(__file__).resolve().parents[1]
-PAGES = sorted(
-    p
-    for p in [
-        REPO / "README.md",
-        *REPO.glob("docs/**/*.md"),
-        *REPO.glob("checkpoints/*.md"),
-        *REPO.glob("experiments/*.md"),
-    ]
-    if p.is_file()
-)
 SCRIPT_DIRS = ("scripts/", "benchmarks/", "experiments/")
 
 
