@@ -58,11 +58,13 @@ def validate(actor: torch.nn.Module, robot: object, env: object, problems: list,
     from pointplan.models.inputs import goal_input, obs_input
     from pointplan.planners.policy import rollout_batch
 
+    device = next(actor.parameters()).device
+
     def act(o: np.ndarray, q: np.ndarray, g: np.ndarray) -> np.ndarray:
         with torch.no_grad():
-            obs = torch.as_tensor(obs_input(robot, o), dtype=torch.float32)  # type: ignore[arg-type]
-            goal = torch.as_tensor(goal_input(robot, q, g), dtype=torch.float32)  # type: ignore[arg-type]
-            return actor.act(obs, goal).numpy()  # type: ignore[operator]
+            obs = torch.as_tensor(obs_input(robot, o), dtype=torch.float32, device=device)  # type: ignore[arg-type]
+            goal = torch.as_tensor(goal_input(robot, q, g), dtype=torch.float32, device=device)  # type: ignore[arg-type]
+            return actor.act(obs, goal).cpu().numpy()  # type: ignore[operator]
 
     actor.eval()
     res = rollout_batch(act, robot, env, problems, horizon, seed=0)  # type: ignore[arg-type]
@@ -127,7 +129,7 @@ def run_bc(cell: str, args: argparse.Namespace) -> dict:
     torch.manual_seed(0)
     rng = np.random.default_rng(0)
     shape = observation_shape(robot, env)
-    actor = Actor(shape, robot.twist_dim, robot.twist_dim, cfg.net)
+    actor = Actor(shape, robot.twist_dim, robot.twist_dim, cfg.net).to(args.device)
     opt = torch.optim.Adam(actor.parameters(), lr=cfg.lr)
     val = scenario.problems("val", args.val_episodes, seed=0)
     run_dir = Path(args.runs) / f"{cell.replace(':', '_')}_bc"
@@ -217,6 +219,7 @@ def run_rl(cell: str, args: argparse.Namespace) -> dict:
         eval_episodes=args.val_episodes,
         net=net_config(encoder, args.width),  # type: ignore[arg-type]
         sac=SACConfig(),
+        device=args.device,
     )
     run_dir = Path(args.runs) / f"{cell.replace(':', '_')}_rl"
     last = run_dir / "last.pt"
@@ -335,6 +338,11 @@ def main() -> int:
     ap.add_argument("--redo", action="store_true", help="run cells whose result is in --out already")
     ap.add_argument("--quiet", action="store_true")
     ap.add_argument("--threads", type=int, default=1, help="PyTorch threads (1 when another job shares the cores)")
+    ap.add_argument(
+        "--device",
+        default="cpu",
+        help="where the networks train: cpu or cuda; the same run, resumable on either (default: %(default)s)",
+    )
     args = ap.parse_args()
     out = Path(args.out)
     if args.method:
