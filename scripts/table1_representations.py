@@ -5,7 +5,8 @@ from scratch (RL), under one budget per method that this machine can afford (the
 BC on 1e6 expert steps for 200 epochs, RL for 1e6 environment steps). Every cell is
 selected on the validation split (200 problems) and evaluated once on the 400 test
 problems with ``pointplan eval``. One JSON per cell goes to ``--out``; ``--plot`` draws the
-validation curves of all cells that are there.
+validation curves of all cells that are there, each with the paper's test result as a marker
+on the right edge.
 
     python scripts/table1_representations.py --method bc                 # the five BC cells
     python scripts/table1_representations.py --method rl --cells surface-normals:pointnet
@@ -261,6 +262,7 @@ def plot(out_dir: Path, path: str) -> None:
         (axes[0], "bc", "epochs", "epochs of behavioural cloning"),
         (axes[1], "rl", "env_steps", "environment steps (SAC + HER)"),
     ):
+        edge = matplotlib.transforms.blended_transform_factory(ax.transAxes, ax.transData)
         for k, cell in enumerate(CELLS):  # one colour per cell in both panels
             f = out_dir / f"{cell.replace(':', '_')}_{method}.json"
             if not f.exists():
@@ -276,12 +278,16 @@ def plot(out_dir: Path, path: str) -> None:
                 color=f"C{k}",
                 label=cell.replace(":", " / "),
             )
+            # the paper's test result for the cell, a marker on the right edge
+            paper = PAPER[cell][0 if method == "bc" else 1]
+            ax.plot([1.0], [paper], marker="<", ms=8, color=f"C{k}", clip_on=False, transform=edge)
         ax.set_xlabel(xlabel)
         ax.set_ylabel("validation success (%)")
         ax.set_ylim(0, 100)
         ax.grid(alpha=0.3)
         ax.set_title({"bc": "behavioural cloning", "rl": "reinforcement learning"}[method])
         if ax.lines:
+            ax.plot([], [], marker="<", ms=8, ls="none", color="0.4", label="the paper's test result")
             ax.legend(fontsize=8, loc="lower right")
         else:
             ax.text(0.5, 0.5, "not run yet", ha="center", va="center", transform=ax.transAxes, color="0.5")
@@ -380,7 +386,8 @@ def main() -> int:
                 **result,
                 "wall_time_s": time.perf_counter() - t0,
             }
-            (out / f"{cell.replace(':', '_')}_{args.method}.json").write_text(json.dumps(record, indent=1))
+            if result.get("curve") or not result.get("interrupted"):  # nothing to keep before a first validation
+                (out / f"{cell.replace(':', '_')}_{args.method}.json").write_text(json.dumps(record, indent=1))
             if result.get("interrupted"):
                 print(f"{cell} {args.method}: interrupted", file=sys.stderr)
                 break

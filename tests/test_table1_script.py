@@ -40,3 +40,36 @@ def test_patience_counts_from_the_first_epoch_reaching_the_best(table1) -> None:
         [{"epochs": 5, "val_success": 0.8}, {"epochs": 10, "val_success": 0.7}, {"epochs": 15, "val_success": 0.7}], 10
     )
     assert not spent([{"epochs": 5, "val_success": 0.8}, {"epochs": 10, "val_success": 0.7}], 10)
+
+
+@pytest.mark.parametrize("curve", [[], [{"epochs": 1, "val_success": 0.5, "wall_time_s": 1.0}]])
+def test_an_interrupted_cell_keeps_a_record_only_after_a_validation(table1, tmp_path, monkeypatch, curve) -> None:  # type: ignore[no-untyped-def]
+    monkeypatch.setattr(table1, "run_bc", lambda cell, args: {"curve": list(curve), "interrupted": True})
+    argv = ["table1", "--method", "bc", "--cells", "surface:pointnet", "--out", str(tmp_path), "--runs", str(tmp_path)]
+    monkeypatch.setattr("sys.argv", argv)
+    table1.main()
+    record = tmp_path / "surface_pointnet_bc.json"
+    assert record.exists() == bool(curve)
+    if curve:
+        import json
+
+        assert json.loads(record.read_text())["curve"] == curve
+
+
+def test_the_plot_marks_the_papers_result_of_each_drawn_cell(table1, tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    import json
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    curve = [{"env_steps": 20000, "val_success": 0.3}, {"env_steps": 40000, "val_success": 0.4}]
+    (tmp_path / "interior_mlp_rl.json").write_text(json.dumps({"curve": curve}))
+    figures = []
+    monkeypatch.setattr(plt.Figure, "savefig", lambda self, *a, **k: figures.append(self))
+    table1.plot(tmp_path, str(tmp_path / "curves.png"))
+    rl = figures[0].axes[1]
+    markers = [line for line in rl.lines if line.get_marker() == "<" and len(line.get_ydata()) == 1]
+    assert [float(m.get_ydata()[0]) for m in markers] == [table1.PAPER["interior:mlp"][1]]
+    assert not [line for line in figures[0].axes[0].lines if line.get_marker() == "<" and len(line.get_ydata())]
