@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 from pathlib import Path
 
 import pytest
@@ -51,14 +52,10 @@ def test_an_interrupted_cell_keeps_a_record_only_after_a_validation(table1, tmp_
     record = tmp_path / "surface_pointnet_bc.json"
     assert record.exists() == bool(curve)
     if curve:
-        import json
-
         assert json.loads(record.read_text())["curve"] == curve
 
 
 def test_the_plot_marks_the_papers_result_of_each_drawn_cell(table1, tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
-    import json
-
     import matplotlib
 
     matplotlib.use("Agg")
