@@ -577,6 +577,82 @@ def test_training_with_demonstrations_in_the_batches(tmp_path: Path) -> None:
         train(replace(cfg, demo_share=1.0), tmp_path / "c", progress=False)
 
 
+def test_occupancy_images_are_stored_as_bytes_without_loss(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Demonstration images are kept as bytes (0 or 1, as the observer draws them in
+    float32), and cloning from the bytes fits exactly as cloning from float32 images."""
+    from pointplan.learning import bc as bc_mod
+    from pointplan.learning.bc import fit_actor, observe_demos, stored_obs_tensor
+    from pointplan.models.actor_critic import Actor
+    from pointplan.observers import make_observer
+
+    scenario = Narrow2DScenario()
+    demos = generate_demos(scenario, 6, seed=0, progress=False)
+    robot, env = scenario.robot, EnvConfig(observation="image")
+    stored = observe_demos(demos, robot, env, np.random.default_rng(0))
+    assert stored.dtype == np.uint8 and stored.shape == (len(demos), 1, 64, 64)
+    plain = make_observer("image", robot)
+    plain.bind([demos.problems[j].scene for j in demos.scene])
+    drawn = plain.observe(demos.q, np.random.default_rng(0))
+    assert drawn.dtype == np.float32 and set(np.unique(drawn)) == {0.0, 1.0}
+    assert np.array_equal(stored.astype(np.float32), drawn)
+    t = stored_obs_tensor(robot, stored, "cpu")
+    assert t.dtype == torch.uint8 and torch.equal(t[:5].float(), torch.as_tensor(drawn[:5]))
+
+    net = replace(SMALL, encoder=EncoderConfig("cnn", 16, 2))
+    real = bc_mod.observe_demos
+    losses = []
+    for as_float in (False, True):
+        if as_float:
+            monkeypatch.setattr(bc_mod, "observe_demos", lambda *a, **k: real(*a, **k).astype(np.float32))
+        torch.manual_seed(0)
+        actor = Actor((1, 64, 64), 2, 2, net)
+        opt = torch.optim.Adam(actor.parameters(), lr=1e-3)
+        losses.append(fit_actor(actor, opt, demos, robot, env, 2, 64, np.random.default_rng(0), 0, False))
+    assert losses[0] == losses[1] and losses[0][-1] < losses[0][0]
+
+
+def test_image_training_keeps_bytes_in_its_buffers(tmp_path: Path) -> None:
+    """SAC + HER on occupancy images: the replay buffer and the demonstrations' buffer hold
+    bytes, the batches reach the networks as the images the observer drew."""
+    from pointplan.learning import train as train_mod
+    from pointplan.learning.bc import save_demos
+    from pointplan.learning.sac import SACConfig
+    from pointplan.scenes.scenarios import make_scenario
+
+    scenario = make_scenario("narrow2d")
+    demos = generate_demos(scenario, 6, seed=0, progress=False)
+    save_demos(tmp_path / "demos.npz", scenario, demos, "train", 0)
+    cfg = TrainConfig(
+        env="narrow2d",
+        observation="image",
+        num_envs=4,
+        total_steps=240,
+        warmup_steps=100,
+        eval_every=240,
+        eval_episodes=4,
+        net=replace(SMALL, encoder=EncoderConfig("cnn", 16, 2)),
+        sac=SACConfig(batch_size=32, bc_weight=1.0),
+        demo_share=0.25,
+        demos=str(tmp_path / "demos.npz"),
+    )
+    seen = []
+    real = train_mod._sample
+
+    def spy(run):  # type: ignore[no-untyped-def]
+        b = real(run)
+        seen.append((run.buffer.obs.dtype, run.demo_buffer.obs.dtype, b.obs.dtype, np.unique(b.obs)))
+        return b
+
+    train_mod._sample = spy
+    try:
+        res = train(cfg, tmp_path / "run", progress=False)
+    finally:
+        train_mod._sample = real
+    assert seen and np.isfinite(res.history[-1]["critic_loss"]) and np.isfinite(res.history[-1]["bc_loss"])
+    own, demo, batch, values = seen[-1]
+    assert own == demo == batch == np.uint8 and set(values) == {0, 1}
+
+
 def test_q_normalisation_makes_the_actor_update_independent_of_the_value_scale() -> None:
     """``bc_q_normalise``: with the SAC term divided by mean |Q|, critics that rate actions
     the same way at scales 1 and 100 move the actor identically (temperature ~0); without

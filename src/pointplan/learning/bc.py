@@ -305,7 +305,9 @@ def observe_demos(
     demos: Demos, robot: Robot, env: EnvConfig, rng: np.random.Generator, chunk: int = 4096
 ) -> np.ndarray:
     """Observations of every demonstration step (the observer's random subsets are drawn
-    anew on every call, so calling again gives a fresh augmentation)."""
+    anew on every call, so calling again gives a fresh augmentation), in the observer's
+    ``storage_dtype`` (occupancy images as bytes: a million 64 x 64 images take 4 GB,
+    not 16)."""
     kwargs: dict[str, Any] = {} if env.observation == "image" else {"n_points": env.n_points}
     name = env.observation or ("surface-normals" if robot.dim == 2 else "global")
     out: np.ndarray | None = None  # filled chunk by chunk (a million steps of 256 points: 6 GB)
@@ -315,11 +317,20 @@ def observe_demos(
         obs.bind([demos.problems[j].scene for j in demos.scene[sl]])
         part = obs.observe(demos.q[sl], rng)
         if out is None:
-            out = np.empty((len(demos), *part.shape[1:]), part.dtype)
+            out = np.empty((len(demos), *part.shape[1:]), obs.storage_dtype)
         out[sl] = part
     if out is None:
         raise ValueError("no demonstration steps to observe")
     return out
+
+
+def stored_obs_tensor(robot: Robot, obs: np.ndarray, device: torch.device | str) -> torch.Tensor:
+    """Many observations (:func:`observe_demos`) as one tensor to index batches from:
+    point sets as the network takes them (scaled in place, float32), images in their
+    stored dtype, so that only each batch is converted (``batch.float()``)."""
+    if obs.dtype == np.float32:
+        return torch.as_tensor(obs_input(robot, obs, copy=False), device=device)
+    return torch.as_tensor(obs, device=device)
 
 
 def demo_episodes(
@@ -735,13 +746,13 @@ def fit_actor(
     for ep in passes:
         if obs is None or (refresh_every and ep % refresh_every == 0):
             obs = None  # (the old subsets freed first: one copy of them in memory at a time)
-            obs = torch.as_tensor(obs_input(robot, observe_demos(demos, robot, env, rng), copy=False), device=device)
+            obs = stored_obs_tensor(robot, observe_demos(demos, robot, env, rng), device)
         n = len(demos) if ep + 1 <= epochs else int(len(demos) * (epochs - ep))
         perm = torch.as_tensor(rng.permutation(len(demos))[:n], device=device)
         total, stopped = 0.0, False
         for s in range(0, len(perm), batch_size):
             b = perm[s : s + batch_size]
-            mean, log_std = actor(obs[b], g_all[b])
+            mean, log_std = actor(obs[b].float(), g_all[b])
             loss = ((torch.tanh(mean) - act[b]) ** 2).sum(-1).mean()
             full = loss + spread_weight * spread_loss(mean, log_std, act[b]) if spread_weight > 0 else loss
             opt.zero_grad(set_to_none=True)

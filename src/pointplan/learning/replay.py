@@ -75,8 +75,10 @@ class EpisodeStaging:
 class EpisodeReplay:
     """A ring buffer of ``capacity`` transitions.
 
-    Memory: observations and next observations are float32 (``2 * capacity * obs_size * 4``
-    bytes: 2.0 GB for 1e6 transitions of 64 points x 4 features).
+    Memory: observations and next observations are kept in ``obs_dtype``, float32 for
+    point sets (``2 * capacity * obs_size * 4`` bytes: 2.0 GB for 1e6 transitions of 64
+    points x 4 features), bytes for occupancy images (their observer's
+    ``storage_dtype``: 8.2 GB for 1e6 transitions of 64 x 64 images, not 33).
     """
 
     def __init__(

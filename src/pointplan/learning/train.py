@@ -229,7 +229,11 @@ def _start(cfg: TrainConfig, folder: RunDir, resume: str | Path | None, remote: 
             )
     robot = scenario.robot
     run.buffer = EpisodeReplay(
-        int(min(cfg.sac.buffer_size, max(cfg.total_steps, 10_000))), obs_shape, robot.config_dim, robot.twist_dim
+        int(min(cfg.sac.buffer_size, max(cfg.total_steps, 10_000))),
+        obs_shape,
+        robot.config_dim,
+        robot.twist_dim,
+        core.observer.storage_dtype,
     )
     run.buffer.track(cfg.num_envs, core.horizon)
     run.val_problems = scenario.problems("val", cfg.eval_episodes, seed=cfg.seed)
@@ -279,7 +283,13 @@ def _demo_replay(run: _Run) -> EpisodeReplay:
 
     robot = run.scenario.robot
     episodes = demo_episodes(run.demos, robot, run.env_cfg, run.rng, run.core.horizon)
-    buf = EpisodeReplay(sum(len(e[2]) for e in episodes), run.obs_shape, robot.config_dim, robot.twist_dim)
+    buf = EpisodeReplay(
+        sum(len(e[2]) for e in episodes),
+        run.obs_shape,
+        robot.config_dim,
+        robot.twist_dim,
+        run.core.observer.storage_dtype,
+    )
     for episode in episodes:
         buf.add_episode(*episode)
     return buf
@@ -304,16 +314,16 @@ def _demo_batch(run: _Run) -> DemoBatch | None:
     gradient steps)."""
     if run.demos is None:
         return None
-    from ..models.inputs import obs_input
-    from .bc import observe_demos
+    from .bc import observe_demos, stored_obs_tensor
 
     agent, cfg = run.agent, run.cfg
     if run.demo_obs is None or agent.updates - run.demo_drawn_at >= cfg.demo_refresh:
         robot = run.scenario.robot
-        run.demo_obs = agent.tensor(obs_input(robot, observe_demos(run.demos, robot, run.env_cfg, run.rng), copy=False))
+        run.demo_obs = None  # (the old observations freed first)
+        run.demo_obs = stored_obs_tensor(robot, observe_demos(run.demos, robot, run.env_cfg, run.rng), agent.device)
         run.demo_drawn_at = agent.updates
     idx = torch.as_tensor(run.rng.integers(0, len(run.demos), cfg.sac.batch_size), device=agent.device)
-    return DemoBatch(run.demo_obs[idx], run.demo_goal[idx], run.demo_action[idx])
+    return DemoBatch(run.demo_obs[idx].float(), run.demo_goal[idx], run.demo_action[idx])
 
 
 def _resume(run: _Run, path: str | Path) -> None:

@@ -27,11 +27,15 @@ class Observer(ABC):
     ``draws_one()``, which give the observation ``observe`` would draw for one robot in
     its one bound static scene from a block of uniform numbers; ``compiled_points``, that
     observation is a uniform subset of ``points_one()`` in the robot's frame, drawn as
-    :class:`PointSetObserver` draws it (the compiled rollout reproduces it)."""
+    :class:`PointSetObserver` draws it (the compiled rollout reproduces it).
+
+    ``storage_dtype``: the dtype that holds many observations without loss (replay
+    buffers, demonstrations); ``observe`` itself always returns float32."""
 
     name: str
     one_robot: bool = False
     compiled_points: bool = False
+    storage_dtype: type = np.float32
 
     def __init__(self, robot: Robot) -> None:
         self.robot = robot
