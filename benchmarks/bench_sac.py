@@ -3,6 +3,7 @@
     python benchmarks/bench_sac.py            # ~5 s per configuration
     python benchmarks/bench_sac.py --quick
     python benchmarks/bench_sac.py --image    # the Table 1 CNN cell, channels-last against the default layout
+    python benchmarks/bench_sac.py --image-malloc   # the same cell, keep_freed_memory() against glibc's default
 
 Updates use batches of 256 transitions of 64 points x 4 features (2D-Narrow observations
 from the environment), HER relabelling included. Run it on an otherwise idle machine:
@@ -141,13 +142,82 @@ def bench_image(duration: float, device: str) -> None:
     print(f"channels-last: {rates['channels-last (shipped)'] / rates['default layout']:.2f}x the default layout")
 
 
+def image_rate(duration: float, device: str) -> None:
+    """One process's image / CNN update rate (channels-last, as shipped) and the share of
+    its CPU time spent in the kernel, as one JSON line; ``keep_freed_memory()`` applies
+    unless ``POINTPLAN_SYSTEM_MALLOC`` is set."""
+    import json
+    import resource
+
+    from pointplan.learning.memory import keep_freed_memory
+
+    kept = keep_freed_memory()
+    rng = np.random.default_rng(0)
+    buf = image_buffer(rng)
+    robot = Narrow2DScenario().robot
+    net = NetConfig(
+        EncoderConfig("cnn", 64, 3), head_width=64, head_layers=3, critic_action="pooled", shared_encoder=True
+    )
+    torch.manual_seed(0)
+    sac = SAC(robot, EnvConfig(observation="image"), (1, 64, 64), net, SACConfig(), device=device)
+    sac.update(buf.sample(256, rng))
+    r0 = resource.getrusage(resource.RUSAGE_SELF)
+    n, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < duration:
+        sac.update(buf.sample(256, rng))
+        n += 1
+    rate = n / (time.perf_counter() - t0)
+    r1 = resource.getrusage(resource.RUSAGE_SELF)
+    user, system = r1.ru_utime - r0.ru_utime, r1.ru_stime - r0.ru_stime
+    faults = r1.ru_minflt - r0.ru_minflt
+    print(json.dumps({"kept": kept, "rate": rate, "kernel_share": system / max(user + system, 1e-9), "faults": faults}))
+
+
+def bench_image_malloc(duration: float, rounds: int, device: str) -> None:
+    """The image / CNN cell's update rate with glibc's default ``malloc`` and with
+    :func:`~pointplan.learning.memory.keep_freed_memory`, each in its own process, taking
+    turns ``rounds`` times; the ratio of the median rates."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    rates: dict[str, list[float]] = {"glibc default": [], "keep_freed_memory": []}
+    for r in range(rounds):
+        for name in rates:
+            env = dict(os.environ)
+            env.pop("POINTPLAN_SYSTEM_MALLOC", None)
+            if name == "glibc default":
+                env["POINTPLAN_SYSTEM_MALLOC"] = "1"
+            cmd = [sys.executable, __file__, "--image-rate", str(duration), "--device", device]
+            line = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout.strip().splitlines()
+            res = json.loads(line[-1])
+            rates[name].append(res["rate"])
+            print(
+                f"round {r + 1}, {name:18s} {res['rate']:6.2f} updates/s, kernel {100 * res['kernel_share']:4.1f}% "
+                f"of CPU time, {res['faults'] / max(duration, 1e-9):9.0f} page faults/s",
+                flush=True,
+            )
+    med = {k: float(np.median(v)) for k, v in rates.items()}
+    print(f"keep_freed_memory: {med['keep_freed_memory'] / med['glibc default']:.2f}x glibc's default (median rates)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--image", action="store_true", help="the Table 1 image / CNN cell instead")
+    ap.add_argument("--image-malloc", action="store_true", help="the image cell, keep_freed_memory() or not")
+    ap.add_argument("--image-rate", type=float, default=None, help=argparse.SUPPRESS)  # (one child's run)
+    ap.add_argument("--rounds", type=int, default=3)
     args = ap.parse_args()
     duration = 2.0 if args.quick else 5.0
+    if args.image_rate is not None:
+        image_rate(args.image_rate, args.device)
+        return
+    if args.image_malloc:
+        bench_image_malloc(4 * duration, args.rounds, args.device)
+        return
     if args.image:
         bench_image(4 * duration, args.device)
         return

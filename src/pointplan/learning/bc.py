@@ -29,6 +29,7 @@ from ..parallel import Interrupted, backend, wants_workers
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Problem
+from .memory import keep_freed_memory
 from .rundir import RunDir, load_trainer_state, say_interrupted_early
 
 if TYPE_CHECKING:
@@ -733,6 +734,8 @@ def fit_actor(
     the fit with the current pass unfinished (and not counted); ``on_epoch``: called with
     ``{"epoch", "loss"}`` after each pass."""
     device = next(actor.parameters()).device
+    if env.observation == "image":  # the CNN's activations: large blocks freed and taken every batch
+        keep_freed_memory()
     act = torch.as_tensor(demos.action, device=device)
     g_all = torch.as_tensor(goal_input(robot, demos.q, demos.goal), device=device)
     losses: list[float] = done if done is not None else []

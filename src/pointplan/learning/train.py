@@ -28,6 +28,7 @@ from ..parallel import RolloutSource, backend, wants_workers
 from ..scenes.scenarios import Scenario, make_scenario
 from ..scenes.scene import Problem
 from .curriculum import EpisodeSource, FailurePool
+from .memory import keep_freed_memory
 from .replay import Batch, EpisodeReplay
 from .rundir import MetricsLog, RunDir, best_note, best_or_none
 from .sac import SAC, DemoBatch, SACConfig
@@ -215,6 +216,8 @@ def _start(cfg: TrainConfig, folder: RunDir, resume: str | Path | None, remote: 
     env_cfg = EnvConfig(observation=cfg.observation, n_points=cfg.n_points, split="train", action_cost=cfg.action_cost)
     core = BatchedCore(scenario, cfg.num_envs, env_cfg)
     obs_shape = tuple(core.observer.space.shape)
+    if cfg.observation == "image":  # the CNN's activations: large blocks freed and taken every update
+        keep_freed_memory()
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     agent = SAC(scenario.robot, env_cfg, obs_shape, cfg.net, cfg.sac, cfg.device)
