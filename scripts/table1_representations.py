@@ -103,8 +103,11 @@ def run_bc(cell: str, args: argparse.Namespace) -> dict:
         generate_demos,
         load_demos,
         observation_shape,
+        observations_vary,
+        observe_demos,
         policy_payload,
         save_demos,
+        stored_obs_tensor,
     )
     from pointplan.models.actor_critic import Actor
     from pointplan.models.checkpoint import save_checkpoint, to_dict
@@ -149,11 +152,16 @@ def run_bc(cell: str, args: argparse.Namespace) -> dict:
             start = int(state["done"]) + args.bc_eval_every
             print(f"{cell} bc: resuming after {state['done']} epochs ({state_file})", file=sys.stderr)
     t0 = time.perf_counter() - before
+    # observations that do not vary (the image) are computed once, not at every epoch:
+    # the same values, and the same random stream (observing them draws nothing)
+    fixed = None
     for done in range(start, args.bc_epochs + 1, args.bc_eval_every):
         if patience_spent(curve, args.bc_patience):
             print(f"{cell} bc: no better validation in {args.bc_patience} epochs, stopped", file=sys.stderr)
             break
         try:
+            if fixed is None and not observations_vary(robot, env):
+                fixed = stored_obs_tensor(robot, observe_demos(demos, robot, env, rng), args.device)
             fit_actor(
                 actor,
                 opt,
@@ -165,6 +173,7 @@ def run_bc(cell: str, args: argparse.Namespace) -> dict:
                 rng,
                 cfg.refresh_every,
                 progress=False,
+                stored=fixed,
             )
             success = validate(actor, robot, env, val, scenario.horizon)
         except KeyboardInterrupt:  # Ctrl-C: the state of the last validation is what is kept

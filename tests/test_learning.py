@@ -611,6 +611,68 @@ def test_occupancy_images_are_stored_as_bytes_without_loss(monkeypatch: pytest.M
     assert losses[0] == losses[1] and losses[0][-1] < losses[0][0]
 
 
+def test_images_are_observed_once_for_every_epoch(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The occupancy image draws nothing at random (``stochastic`` False: the same images,
+    the generator untouched), so cloning rasterises the demonstrations once however often
+    it refreshes, and a caller's stored images give exactly the same fit; the point
+    observers do draw, and do refresh."""
+    from pointplan.learning import bc as bc_mod
+    from pointplan.learning.bc import (
+        fit_actor,
+        observation_shape,
+        observations_vary,
+        observe_demos,
+        stored_obs_tensor,
+    )
+    from pointplan.models.actor_critic import Actor
+    from pointplan.observers import OBSERVERS, make_observer
+
+    scenario = Narrow2DScenario()
+    demos = generate_demos(scenario, 6, seed=0, progress=False)
+    robot = scenario.robot
+    scenes = [demos.problems[j].scene for j in demos.scene]
+    for name in ("image", "surface", "surface-normals", "interior"):
+        observer = make_observer(name, robot)
+        observer.bind(scenes)
+        rng = np.random.default_rng(0)
+        before = rng.bit_generator.state
+        first, again = observer.observe(demos.q, rng), observer.observe(demos.q, rng)
+        untouched = rng.bit_generator.state == before
+        assert OBSERVERS[name].stochastic == (not untouched) == (not np.array_equal(first, again)), name
+        assert observations_vary(robot, EnvConfig(observation=name)) == OBSERVERS[name].stochastic
+
+    real = bc_mod.observe_demos
+    calls: list[str] = []
+
+    def counted(demos, robot, env, rng, *a, **k):  # type: ignore[no-untyped-def]
+        calls.append(env.observation)
+        return real(demos, robot, env, rng, *a, **k)
+
+    monkeypatch.setattr(bc_mod, "observe_demos", counted)
+    net = replace(SMALL, encoder=EncoderConfig("cnn", 16, 2))
+    env = EnvConfig(observation="image")
+    fits = []
+    for stored in (None, stored_obs_tensor(robot, observe_demos(demos, robot, env, np.random.default_rng(0)), "cpu")):
+        calls.clear()
+        torch.manual_seed(0)
+        actor = Actor((1, 64, 64), 2, 2, net)
+        opt = torch.optim.Adam(actor.parameters(), lr=1e-3)
+        losses = fit_actor(actor, opt, demos, robot, env, 3, 64, np.random.default_rng(0), 1, False, stored=stored)
+        assert calls == ([] if stored is not None else ["image"])  # refresh_every=1: three passes, one rasterising
+        fits.append((losses, actor.state_dict()))
+    assert fits[0][0] == fits[1][0]
+    assert all(torch.equal(fits[0][1][k], fits[1][1][k]) for k in fits[0][1])
+
+    calls.clear()
+    points = EnvConfig(observation="surface", n_points=16)
+    actor = Actor(observation_shape(robot, points), 2, 2, SMALL)
+    opt = torch.optim.Adam(actor.parameters(), lr=1e-3)
+    fit_actor(actor, opt, demos, robot, points, 3, 64, np.random.default_rng(0), 1, False)
+    assert calls == ["surface"] * 3
+    with pytest.raises(ValueError, match="do not vary"):
+        fit_actor(actor, opt, demos, robot, points, 1, 64, np.random.default_rng(0), 1, False, stored=torch.zeros(1))
+
+
 def test_image_training_keeps_bytes_in_its_buffers(tmp_path: Path) -> None:
     """SAC + HER on occupancy images: the replay buffer and the demonstrations' buffer hold
     bytes, the batches reach the networks as the images the observer drew."""

@@ -1,4 +1,4 @@
-"""The Table 1 script's stopping rule for its behavioural-cloning cells."""
+"""The Table 1 script: its stopping rule, records and plot, and its image cells' observations."""
 
 from __future__ import annotations
 
@@ -70,3 +70,29 @@ def test_the_plot_marks_the_papers_result_of_each_drawn_cell(table1, tmp_path, m
     markers = [line for line in rl.lines if line.get_marker() == "<" and len(line.get_ydata()) == 1]
     assert [float(m.get_ydata()[0]) for m in markers] == [table1.PAPER["interior:mlp"][1]]
     assert not [line for line in figures[0].axes[0].lines if line.get_marker() == "<" and len(line.get_ydata())]
+
+
+def test_the_image_cell_rasterises_its_demonstrations_once(table1, tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """A BC cell validates after every epoch, each a separate fit; the occupancy images do
+    not vary, so they are observed once for all the epochs (point subsets are drawn anew)."""
+    from pointplan.learning import bc as bc_mod
+
+    real = bc_mod.observe_demos
+    calls: list[str | None] = []
+
+    def counted(demos, robot, env, rng, *a, **k):  # type: ignore[no-untyped-def]
+        calls.append(env.observation)
+        return real(demos, robot, env, rng, *a, **k)
+
+    monkeypatch.setattr(bc_mod, "observe_demos", counted)
+    monkeypatch.setattr(table1, "validate", lambda *a, **k: 0.5)
+    monkeypatch.setattr(table1, "test_eval", lambda *a, **k: {"success_rate": 0.5})
+    for cell, once in (("image:cnn", True), ("surface:pointnet", False)):
+        calls.clear()
+        argv = ["table1", "--method", "bc", "--cells", cell, "--bc-problems", "3", "--bc-epochs", "3"]
+        argv += ["--bc-eval-every", "1", "--width", "16", "--out", str(tmp_path), "--runs", str(tmp_path), "--quiet"]
+        monkeypatch.setattr("sys.argv", argv)
+        table1.main()
+        name = cell.split(":")[0]
+        assert calls == ([name] if once else [name] * 3), cell
+        assert len(json.loads((tmp_path / f"{cell.replace(':', '_')}_bc.json").read_text())["curve"]) == 3

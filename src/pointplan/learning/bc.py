@@ -24,7 +24,7 @@ from ..models.actor_critic import Actor, NetConfig
 from ..models.checkpoint import to_dict
 from ..models.encoders import EncoderConfig
 from ..models.inputs import goal_dim, goal_input, obs_input
-from ..observers import make_observer
+from ..observers import OBSERVERS, make_observer
 from ..parallel import Interrupted, backend, wants_workers
 from ..robots.base import Robot
 from ..scenes.scenarios import Scenario, make_scenario
@@ -310,7 +310,7 @@ def observe_demos(
     ``storage_dtype`` (occupancy images as bytes: a million 64 x 64 images take 4 GB,
     not 16)."""
     kwargs: dict[str, Any] = {} if env.observation == "image" else {"n_points": env.n_points}
-    name = env.observation or ("surface-normals" if robot.dim == 2 else "global")
+    name = _observation_name(robot, env)
     out: np.ndarray | None = None  # filled chunk by chunk (a million steps of 256 points: 6 GB)
     for c in range(0, len(demos), chunk):
         sl = slice(c, c + chunk)
@@ -323,6 +323,19 @@ def observe_demos(
     if out is None:
         raise ValueError("no demonstration steps to observe")
     return out
+
+
+def _observation_name(robot: Robot, env: EnvConfig) -> str:
+    return env.observation or ("surface-normals" if robot.dim == 2 else "global")
+
+
+def observations_vary(robot: Robot, env: EnvConfig) -> bool:
+    """Whether :func:`observe_demos` gives new observations on every call (random point
+    subsets, random rays) or the same ones, leaving ``rng`` untouched (the occupancy image:
+    :attr:`~pointplan.observers.base.Observer.stochastic`); the latter need observing
+    once for any number of epochs."""
+    cls = OBSERVERS.get(_observation_name(robot, env))
+    return cls is None or cls.stochastic
 
 
 def stored_obs_tensor(robot: Robot, obs: np.ndarray, device: torch.device | str) -> torch.Tensor:
@@ -408,7 +421,8 @@ class BCConfig:
     batch_size: int = field(default=256, metadata={"min": 1})
     seed: int = 0
     device: str = "cpu"
-    #: draw new observation subsets every this many epochs (0: never)
+    #: draw new observation subsets every this many epochs (0: never; observations that
+    #: draw nothing at random, the occupancy image, are computed once)
     refresh_every: int = 5
     #: weight of a Gaussian likelihood term that fits the actor's spread (its log-std) to
     #: the residuals of its mean action, before the tanh, with the mean held fixed; 0 leaves
@@ -725,15 +739,23 @@ def fit_actor(
     done: list[float] | None = None,
     stop: Callable[[], bool] | None = None,
     on_epoch: Callable[[dict[str, float]], None] | None = None,
+    stored: torch.Tensor | None = None,
 ) -> list[float]:
     """Fit the actor's mean action to the demonstrations (L2) for ``epochs`` passes (a
-    fraction runs part of one); new observation subsets every ``refresh_every`` epochs.
+    fraction runs part of one); new observation subsets every ``refresh_every`` epochs
+    (observations that do not vary, :func:`observations_vary`, are computed once).
     With ``spread_weight`` the log-std is fitted too (:func:`spread_loss`). Returns the
     mean L2 loss of each pass. ``done``: the losses of passes made before (the fit goes on
     after them, appending to that list); ``stop``: asked after every gradient step, ends
     the fit with the current pass unfinished (and not counted); ``on_epoch``: called with
-    ``{"epoch", "loss"}`` after each pass."""
+    ``{"epoch", "loss"}`` after each pass; ``stored``: the observations of every step,
+    :func:`stored_obs_tensor` of :func:`observe_demos`, computed once by a caller that
+    fits many times on observations that do not vary (the occupancy image, whose million
+    images of the paper's budget take many minutes to rasterise)."""
     device = next(actor.parameters()).device
+    vary = observations_vary(robot, env)
+    if stored is not None and vary:
+        raise ValueError(f"stored observations are for observers that do not vary; {env.observation!r} does")
     if env.observation == "image":  # the CNN's activations: large blocks freed and taken every batch
         keep_freed_memory()
     act = torch.as_tensor(demos.action, device=device)
@@ -745,9 +767,9 @@ def fit_actor(
         from tqdm import tqdm
 
         passes = tqdm(passes, desc="behavioural cloning", unit="epoch", total=total_passes, initial=len(losses))
-    obs = None
+    obs = stored
     for ep in passes:
-        if obs is None or (refresh_every and ep % refresh_every == 0):
+        if obs is None or (vary and refresh_every and ep % refresh_every == 0):
             obs = None  # (the old subsets freed first: one copy of them in memory at a time)
             obs = stored_obs_tensor(robot, observe_demos(demos, robot, env, rng), device)
         n = len(demos) if ep + 1 <= epochs else int(len(demos) * (epochs - ep))

@@ -30,12 +30,18 @@ class Observer(ABC):
     :class:`PointSetObserver` draws it (the compiled rollout reproduces it).
 
     ``storage_dtype``: the dtype that holds many observations without loss (replay
-    buffers, demonstrations); ``observe`` itself always returns float32."""
+    buffers, demonstrations); ``observe`` itself always returns float32.
+
+    ``stochastic``: ``observe`` draws from its generator (a random subset of points, random
+    rays), so observing again gives a fresh sample; ``False`` where the same
+    configurations in the same scenes always give the same observations and the generator
+    is left untouched (the occupancy image), so many observations need computing once."""
 
     name: str
     one_robot: bool = False
     compiled_points: bool = False
     storage_dtype: type = np.float32
+    stochastic: bool = True
 
     def __init__(self, robot: Robot) -> None:
         self.robot = robot

@@ -17,10 +17,12 @@ class OccupancyImage(Observer):
     it. A cell is 1 where the robot placed at the cell centre would collide, or where the
     cell lies outside the workspace, else 0. Shape ``(1, size, size)``, rows along x,
     columns along y. Every cell is 0 or 1, so many images are stored as bytes
-    (``storage_dtype``), a quarter of float32's memory."""
+    (``storage_dtype``), a quarter of float32's memory. Nothing is drawn at random: the
+    image is a function of the configuration and the scene (``stochastic`` is False)."""
 
     name = "image"
     storage_dtype = np.uint8
+    stochastic = False
 
     def __init__(self, robot: Robot, size: int = 64, extent: float = 1.0) -> None:
         super().__init__(robot)
