@@ -230,8 +230,18 @@ def test_viewer_starts_moves_and_stops(
         while slider.value == 0 and time.monotonic() < deadline:
             time.sleep(0.05)
         h["play"].value = False
+        assert int(slider.value) > 0, "play did not move the slider"
+
+        # the player thread sets the slider and then places the robot: on a loaded machine
+        # the test can read between the two, so it waits (a while) for the pair to agree
+        def shown() -> bool:
+            want = robot.positions(expected_timed[int(slider.value)])
+            return bool(np.allclose(h["robot"].position, want, atol=1e-6))
+
+        deadline = time.monotonic() + 3.0
+        while not shown() and time.monotonic() < deadline:
+            time.sleep(0.05)
         t = int(slider.value)
-        assert t > 0, "play did not move the slider"
         np.testing.assert_allclose(h["robot"].position, robot.positions(expected_timed[t]), atol=1e-6)
     finally:
         server.stop()
