@@ -58,6 +58,11 @@ class EnvConfig:
         if self.bounds not in ("clip", "stop"):
             raise ValueError(f"bounds must be 'clip' or 'stop', not {self.bounds!r}")
 
+    def observation_for(self, robot: Robot) -> str:
+        """The observer's name: ``observation``, or by default boundary points with
+        normals in 2D and ``global`` points in 3D."""
+        return self.observation or ("surface-normals" if robot.dim == 2 else "global")
+
 
 def q_free(
     robot: Robot,
@@ -151,7 +156,7 @@ class BatchedCore:
         self.config = config
         self.num_envs = int(num_envs)
         self.horizon = int(config.horizon or scenario.horizon)
-        observation = config.observation or ("surface-normals" if self.robot.dim == 2 else "global")
+        observation = config.observation_for(self.robot)
         kwargs: dict[str, Any] = {}
         if observation != "image" and config.n_points is not None:
             kwargs["n_points"] = config.n_points

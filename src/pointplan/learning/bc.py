@@ -310,7 +310,7 @@ def observe_demos(
     ``storage_dtype`` (occupancy images as bytes: a million 64 x 64 images take 4 GB,
     not 16)."""
     kwargs: dict[str, Any] = {} if env.observation == "image" else {"n_points": env.n_points}
-    name = _observation_name(robot, env)
+    name = env.observation_for(robot)
     out: np.ndarray | None = None  # filled chunk by chunk (a million steps of 256 points: 6 GB)
     for c in range(0, len(demos), chunk):
         sl = slice(c, c + chunk)
@@ -325,16 +325,12 @@ def observe_demos(
     return out
 
 
-def _observation_name(robot: Robot, env: EnvConfig) -> str:
-    return env.observation or ("surface-normals" if robot.dim == 2 else "global")
-
-
 def observations_vary(robot: Robot, env: EnvConfig) -> bool:
     """Whether :func:`observe_demos` gives new observations on every call (random point
     subsets, random rays) or the same ones, leaving ``rng`` untouched (the occupancy image:
     :attr:`~pointplan.observers.base.Observer.stochastic`); the latter need observing
     once for any number of epochs."""
-    cls = OBSERVERS.get(_observation_name(robot, env))
+    cls = OBSERVERS.get(env.observation_for(robot))
     return cls is None or cls.stochastic
 
 
