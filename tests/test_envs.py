@@ -213,3 +213,36 @@ def test_scenario_bounds_need_no_scene(name, monkeypatch):
     low, high = scenario.bounds
     np.testing.assert_array_equal(low, want.low)
     np.testing.assert_array_equal(high, want.high)
+
+
+def test_occupancy_image_matches_the_general_collision_check() -> None:
+    """The image's compiled disc-versus-boxes grid gives, cell for cell, what the robot's
+    general collision test (checked against coal in test_geometry) gives at every cell
+    centre, plus the cells outside the bounds: rotated boxes, one to six per scene (so
+    the stacked scenes carry padding), robots near the walls."""
+    from pointplan.geometry.collision import CollisionWorld
+    from pointplan.observers import make_observer
+    from pointplan.robots import Disc2D
+
+    rng = np.random.default_rng(3)
+    robot = Disc2D()
+    scenes = []
+    for _ in range(30):
+        boxes = []
+        for _ in range(rng.integers(1, 7)):
+            a = rng.uniform(0, np.pi)
+            rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+            boxes.append(Box(rng.uniform(0, 1, 2), rng.uniform(0.02, 0.4, 2), rot))
+        scenes.append(Scene(boxes, [0, 0], [1, 1]))
+    q = rng.uniform(0, 1, (30, 2))
+    obs = make_observer("image", robot)
+    obs.bind(scenes)
+    img = obs.observe(q, rng)
+    assert img.shape == (30, 1, 64, 64) and set(np.unique(img)) == {0.0, 1.0}
+    u = (np.arange(64) + 0.5) / 64 * 2 - 1  # cell centres, extent 1 around the robot
+    x, y = q[:, 0, None] + u, q[:, 1, None] + u
+    cells = np.stack(np.broadcast_arrays(x[:, :, None], y[:, None, :]), -1).reshape(30, -1, 2)
+    ref = robot.collides(CollisionWorld.stack([s.world for s in scenes]), cells).reshape(30, 64, 64)
+    ref |= ((x < 0) | (x > 1))[:, :, None] | ((y < 0) | (y > 1))[:, None, :]
+    assert 0.2 < ref.mean() < 0.95  # both kinds of cell, plenty of each
+    assert np.array_equal(img[:, 0] == 1.0, ref)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
@@ -73,24 +74,58 @@ class OccupancyImage(Observer):
 
     def _disc_vs_boxes(self, x: Array, y: Array, radius: float) -> NDArray[np.bool_]:
         """Occupancy ``(E, S, S)`` of the disc at cells ``(x[:, i], y[:, j])`` against the
-        (stacked) boxes.
-
-        Same arithmetic as ``CollisionWorld.spheres_collide`` on the cells, but the cells
-        form a grid: per box, the x and y differences are computed once per row and per
-        column and combined by broadcasting, instead of a general einsum over all cells
-        (about 20x faster at 64 x 64).
-        """
+        (stacked) boxes: :func:`_disc_boxes_grid`, the arithmetic of
+        ``CollisionWorld.spheres_collide`` on a grid of cells."""
         w = self._world
         assert w is not None
-        r2 = radius * radius
         occ = np.zeros((x.shape[0], self.size, self.size), dtype=bool)
-        for k in range(w.box_c.shape[-2]):
-            c, rot, h = w.box_c[:, k], w.box_r[:, k], w.box_h[:, k]  # (E, 2), (E, 2, 2), (E, 2)
-            dx = (x - c[:, 0, None])[:, :, None]  # (E, S, 1)
-            dy = (y - c[:, 1, None])[:, None, :]  # (E, 1, S)
-            ex = []
-            for i in range(2):  # box-frame coordinate i = R[0, i] dx + R[1, i] dy
-                local = rot[:, 0, i, None, None] * dx + rot[:, 1, i, None, None] * dy
-                ex.append(np.maximum(np.abs(local) - h[:, i, None, None], 0.0))
-            occ |= ex[0] * ex[0] + ex[1] * ex[1] <= r2
+        _disc_boxes_grid(
+            np.ascontiguousarray(x, np.float64),
+            np.ascontiguousarray(y, np.float64),
+            np.ascontiguousarray(w.box_c, np.float64),
+            np.ascontiguousarray(w.box_r, np.float64),
+            np.ascontiguousarray(w.box_h, np.float64),
+            radius * radius,
+            occ,
+        )
         return occ
+
+
+@numba.njit(cache=True, nogil=True)
+def _disc_boxes_grid(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    box_c: NDArray[np.float64],
+    box_r: NDArray[np.float64],
+    box_h: NDArray[np.float64],
+    r2: float,
+    occ: NDArray[np.bool_],
+) -> None:
+    """Mark ``occ[e, i, j]`` where a disc of squared radius ``r2`` at ``(x[e, i], y[e, j])``
+    touches one of the boxes ``box_c[e]`` (centres ``(K, 2)``), ``box_r[e]`` (rotations
+    ``(K, 2, 2)``, columns the box axes), ``box_h[e]`` (half sizes ``(K, 2)``).
+
+    Per cell and box: the box-frame coordinates ``R[0, a] dx + R[1, a] dy``, their excess
+    over the half sizes, and the squared distance compared with ``r2``, in the order
+    ``sphere_box_sqdist`` computes them (the same images to the bit). One pass over each
+    image instead of a dozen numpy passes over all of them: 4,096 images of 2D-Narrow
+    (five boxes each) in 0.43 s against 4.95 s by broadcasting, on one shared core.
+    """
+    n_env, size = x.shape
+    for e in range(n_env):
+        for k in range(box_c.shape[1]):
+            cx, cy = box_c[e, k, 0], box_c[e, k, 1]
+            r00, r01, r10, r11 = box_r[e, k, 0, 0], box_r[e, k, 0, 1], box_r[e, k, 1, 0], box_r[e, k, 1, 1]
+            h0, h1 = box_h[e, k, 0], box_h[e, k, 1]
+            for i in range(size):
+                dx = x[e, i] - cx
+                a0 = r00 * dx
+                a1 = r01 * dx
+                for j in range(size):
+                    if occ[e, i, j]:
+                        continue
+                    dy = y[e, j] - cy
+                    ex0 = max(abs(a0 + r10 * dy) - h0, 0.0)
+                    ex1 = max(abs(a1 + r11 * dy) - h1, 0.0)
+                    if ex0 * ex0 + ex1 * ex1 <= r2:
+                        occ[e, i, j] = True
