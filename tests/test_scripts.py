@@ -37,3 +37,33 @@ def test_help_names_the_tools_purpose(path: Path) -> None:
     assert _purpose(path) in " ".join(run.stdout.split()), (
         f"{path.name}: the help does not give the docstring's first paragraph"
     )
+
+
+def test_the_cli_reference_page_is_current(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/reference/cli.md is what scripts/cli_reference.py writes from the parser now, it
+    has a section per command and a row per argument, and its check notices a stale page."""
+    import argparse
+    import importlib.util
+
+    from pointplan.cli import build_parser
+
+    spec = importlib.util.spec_from_file_location("cli_reference", SCRIPTS / "cli_reference.py")
+    assert spec is not None and spec.loader is not None
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    assert tool.main(["--check"]) == 0, "docs/reference/cli.md is out of date: run python scripts/cli_reference.py"
+    page = tool.PAGE.read_text(encoding="utf-8")
+    for name, p in build_parser().commands.items():
+        section = page.split(f"\n## pointplan {name}\n", 1)[1].split("\n## ", 1)[0]
+        for action in p._actions:
+            if not isinstance(action, argparse._HelpAction):
+                assert f"| `{action.option_strings[0] if action.option_strings else action.dest}" in section, (
+                    name,
+                    action.dest,
+                )
+    stale = tmp_path / "cli.md"
+    monkeypatch.setattr(tool, "PAGE", stale)
+    assert tool.main(["--check"]) == 1  # no page
+    stale.write_text(page.replace("| `--episodes EPISODES` |", "| `--episodes N` |", 1), encoding="utf-8")
+    assert tool.main(["--check"]) == 1
+    assert tool.main([]) == 0 and tool.main(["--check"]) == 0
