@@ -39,31 +39,38 @@ def test_help_names_the_tools_purpose(path: Path) -> None:
     )
 
 
-def test_the_cli_reference_page_is_current(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """docs/reference/cli.md is what scripts/cli_reference.py writes from the parser now, it
-    has a section per command and a row per argument, and its check notices a stale page."""
+def test_the_reference_pages_are_current(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/reference/cli.md and api.md are what scripts/reference_pages.py writes from the
+    parser and the code now: a section per command with a row per argument, a section per
+    listed API object; and the check notices a stale or missing page."""
     import argparse
     import importlib.util
 
     from pointplan.cli import build_parser
 
-    spec = importlib.util.spec_from_file_location("cli_reference", SCRIPTS / "cli_reference.py")
+    spec = importlib.util.spec_from_file_location("reference_pages", SCRIPTS / "reference_pages.py")
     assert spec is not None and spec.loader is not None
     tool = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tool)
-    assert tool.main(["--check"]) == 0, "docs/reference/cli.md is out of date: run python scripts/cli_reference.py"
-    page = tool.PAGE.read_text(encoding="utf-8")
+    assert tool.main(["--check"]) == 0, "a reference page is out of date: run python scripts/reference_pages.py"
+    cli = tool.PAGES["cli"].read_text(encoding="utf-8")
     for name, p in build_parser().commands.items():
-        section = page.split(f"\n## pointplan {name}\n", 1)[1].split("\n## ", 1)[0]
+        section = cli.split(f"\n## pointplan {name}\n", 1)[1].split("\n## ", 1)[0]
         for action in p._actions:
             if not isinstance(action, argparse._HelpAction):
-                assert f"| `{action.option_strings[0] if action.option_strings else action.dest}" in section, (
-                    name,
-                    action.dest,
-                )
-    stale = tmp_path / "cli.md"
-    monkeypatch.setattr(tool, "PAGE", stale)
-    assert tool.main(["--check"]) == 1  # no page
-    stale.write_text(page.replace("| `--episodes EPISODES` |", "| `--episodes N` |", 1), encoding="utf-8")
-    assert tool.main(["--check"]) == 1
+                written = action.option_strings[0] if action.option_strings else action.dest
+                assert f"| `{written}" in section, (name, written)
+    api = tool.PAGES["api"].read_text(encoding="utf-8")
+    listed = [(m, n) for _, _, groups in tool.API for m, names in groups for n in names]
+    assert len(listed) > 40
+    for module, name in listed:
+        assert f"\n### {name}\n\n`{module}.{name}`" in api, (module, name)
+    pages = {key: tmp_path / f"{key}.md" for key in tool.PAGES}
+    monkeypatch.setattr(tool, "PAGES", pages)
+    assert tool.main(["--check"]) == 1  # no pages
     assert tool.main([]) == 0 and tool.main(["--check"]) == 0
+    pages["cli"].write_text(cli.replace("| `--episodes EPISODES` |", "| `--episodes N` |", 1), encoding="utf-8")
+    assert tool.main(["--check"]) == 1
+    tool.main([])
+    pages["api"].write_text(api.replace("### BiRRT\n", "### RRT\n", 1), encoding="utf-8")
+    assert tool.main(["--check"]) == 1
