@@ -9,8 +9,10 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib
 import inspect
+import math
 import re
 import sys
 from pathlib import Path
@@ -38,16 +40,10 @@ def _help(action: argparse.Action, prog: str) -> str:
     return action.help % params
 
 
-def _names(action: argparse.Action) -> str:
-    """How the option is written: ``--env ENV``, ``--quiet``, ``-o OUT, --out OUT``, ``scene``."""
-    if not action.option_strings:
-        return str(action.metavar or action.dest)
-    if action.nargs == 0:
-        return ", ".join(action.option_strings)
-    metavar = action.metavar or action.dest.upper()
-    if isinstance(metavar, tuple):
-        metavar = " ".join(metavar)
-    return ", ".join(f"{s} {metavar}" for s in action.option_strings)
+def _names(parser: argparse.ArgumentParser, action: argparse.Action) -> str:
+    """How the argument is written, as in ``--help``: ``--env ENV``, ``--quiet``,
+    ``-o OUT, --out OUT``, ``--encoder-sharing {shared,separate}``, ``scene``."""
+    return parser._get_formatter()._format_action_invocation(action)  # as --help writes it
 
 
 def command_section(name: str, p: argparse.ArgumentParser) -> list[str]:
@@ -56,7 +52,7 @@ def command_section(name: str, p: argparse.ArgumentParser) -> list[str]:
     for action in p._actions:  # argparse has no public list of a parser's arguments
         if isinstance(action, argparse._HelpAction | argparse._VersionAction) or action.help == argparse.SUPPRESS:
             continue
-        rows.append(f"| `{_names(action)}` | {_cell(_help(action, p.prog))} |")
+        rows.append(f"| `{_names(p, action)}` | {_cell(_help(action, p.prog))} |")
     if rows:
         lines += ["| argument | meaning |", "|---|---|", *rows, ""]
     if p.epilog:
@@ -76,7 +72,7 @@ def render_cli() -> str:
         "",
         "Every `pointplan` command and its arguments, generated from the program's own parser by",
         "`python scripts/reference_pages.py` (a test fails when this page and the parser disagree);",
-        "`pointplan COMMAND --help` prints the same. Worked examples: the",
+        "`pointplan COMMAND --help` prints the same, with a usage line. Worked examples: the",
         "[planners](../guide/planners.md#the-command-line) and [training](../guide/training.md#commands)",
         "guides.",
         "",
@@ -167,14 +163,28 @@ API: list[tuple[str, str, list[tuple[str, list[str]]]]] = [
     ),
 ]
 
-_ROLE = re.compile(r":[a-z]+:`~?([^`]+)`")
+_ROLE = re.compile(r":[a-z]+:`(~?)([^`]+)`")
 
 
 def _doc(obj: Any) -> str:
-    """The docstring as Markdown: ``code`` as `code`, Sphinx roles as code."""
-    doc = inspect.getdoc(obj) or ""
-    doc = _ROLE.sub(lambda m: f"`{m.group(1)}`", doc)
+    """The object's own docstring as Markdown (not one inherited from a library, which
+    would tie the page to that library's version, nor the text dataclasses make up for a
+    class without one): ``code`` as `code`, Sphinx roles as code (``~`` keeps the last
+    name)."""
+    doc = inspect.cleandoc(obj.__doc__ or "")
+    if dataclasses.is_dataclass(obj) and doc.startswith(f"{obj.__name__}("):
+        doc = ""
+    doc = _ROLE.sub(lambda m: f"`{m.group(2).rsplit('.', 1)[-1] if m.group(1) else m.group(2)}`", doc)
     return doc.replace("``", "`")
+
+
+def _default(value: Any) -> str:
+    """A default value as Python would spell it (``math.inf``, not ``inf``)."""
+    if isinstance(value, float) and math.isnan(value):
+        return "math.nan"
+    if isinstance(value, float) and math.isinf(value):
+        return "math.inf" if value > 0 else "-math.inf"
+    return repr(value)
 
 
 def _annotation(a: Any) -> str:
@@ -199,7 +209,7 @@ def _signature(name: str, obj: Any) -> str | None:
         if p.annotation is not p.empty:
             text += f": {_annotation(p.annotation)}"
         if p.default is not p.empty:
-            text += f" = {p.default!r}"
+            text += f" = {_default(p.default)}"
         parts.append(text)
     ret = sig.return_annotation
     tail = "" if ret is sig.empty or ret in ("None", None) else f" -> {_annotation(ret)}"

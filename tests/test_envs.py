@@ -215,21 +215,23 @@ def test_scenario_bounds_need_no_scene(name, monkeypatch):
     np.testing.assert_array_equal(high, want.high)
 
 
-def test_occupancy_image_matches_the_general_collision_check() -> None:
+def test_occupancy_image_matches_the_general_collision_check(monkeypatch: pytest.MonkeyPatch) -> None:
     """The image's compiled disc-versus-boxes grid gives, cell for cell, what the robot's
     general collision test (checked against coal in test_geometry) gives at every cell
-    centre, plus the cells outside the bounds: rotated boxes, one to six per scene (so
+    centre, plus the cells outside the bounds: rotated boxes, none to six per scene (so
     the stacked scenes carry padding), robots near the walls."""
     from pointplan.geometry.collision import CollisionWorld
-    from pointplan.observers import make_observer
+    from pointplan.observers import image, make_observer
     from pointplan.robots import Disc2D
 
+    kernel, calls = image._disc_boxes_grid, []
+    monkeypatch.setattr(image, "_disc_boxes_grid", lambda *a: calls.append(1) or kernel(*a))
     rng = np.random.default_rng(3)
     robot = Disc2D()
     scenes = []
     for _ in range(30):
         boxes = []
-        for _ in range(rng.integers(1, 7)):
+        for _ in range(rng.integers(0, 7)):
             a = rng.uniform(0, np.pi)
             rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
             boxes.append(Box(rng.uniform(0, 1, 2), rng.uniform(0.02, 0.4, 2), rot))
@@ -245,4 +247,4 @@ def test_occupancy_image_matches_the_general_collision_check() -> None:
     ref = robot.collides(CollisionWorld.stack([s.world for s in scenes]), cells).reshape(30, 64, 64)
     ref |= ((x < 0) | (x > 1))[:, :, None] | ((y < 0) | (y > 1))[:, None, :]
     assert 0.2 < ref.mean() < 0.95  # both kinds of cell, plenty of each
-    assert np.array_equal(img[:, 0] == 1.0, ref)
+    assert np.array_equal(img[:, 0] == 1.0, ref) and calls == [1]  # the compiled grid drew them

@@ -139,8 +139,8 @@ def timed_path(robot: Robot, path: Array) -> Array:
 
 def densify(robot: Robot, path: Array, resolution: float) -> Array:
     """Configurations along every segment of ``path``, both ends of each segment included:
-    ``(N, config_dim)``. A segment of geodesic length ``l`` gets ``max(1, ceil(l / resolution
-    - 1e-9)) + 1`` evenly spaced configurations (the planners' grid; the slack keeps an edge
+    ``(N, config_dim)``. A segment of geodesic length ``l`` gets
+    ``max(1, ceil(l / resolution - 1e-9)) + 1`` evenly spaced configurations (the planners' grid; the slack keeps an edge
     of exactly ``step`` from getting an extra interval through round-off). A
     one-configuration path is returned as is."""
     path = np.asarray(path, np.float64)

@@ -100,6 +100,10 @@ class TrainConfig:
 
 @dataclass
 class TrainResult:
+    """What :func:`train` returns: the run folder (checkpoints, metrics), the best
+    validation success, the environment steps taken, the wall time and the validation
+    history."""
+
     run_dir: Path
     #: the best validation success, None before the first validation
     best_success: float | None

@@ -32,14 +32,17 @@ class Policy:
 
     @property
     def observation(self) -> str:
+        """The name of the observer the policy was trained on (``surface-normals``, ``local``, ...)."""
         return str(self.meta["observation"])
 
     @property
     def n_points(self) -> int:
+        """Points per observation in training (64 for checkpoints that do not say)."""
         return int(self.meta.get("n_points", 64))
 
     @property
     def env(self) -> str:
+        """The scenario the policy was trained in."""
         return str(self.meta["env"])
 
     @classmethod

@@ -77,7 +77,7 @@ class OccupancyImage(Observer):
         (stacked) boxes: :func:`_disc_boxes_grid`, the arithmetic of
         ``CollisionWorld.spheres_collide`` on a grid of cells."""
         w = self._world
-        assert w is not None
+        assert w is not None and w.box_c.shape[0] == x.shape[0] == y.shape[0]  # the kernel does not check bounds
         occ = np.zeros((x.shape[0], self.size, self.size), dtype=bool)
         _disc_boxes_grid(
             np.ascontiguousarray(x, np.float64),
