@@ -219,6 +219,19 @@ def _signature(name: str, obj: Any) -> str | None:
     return f"{name}(\n" + "".join(f"    {p},\n" for p in parts) + f"){tail}"
 
 
+def _documented(cls: type, name: str, member: Any) -> Any:
+    """``member``, or where it has no docstring the nearest one of pointplan's own base
+    classes that documents ``name`` (``BiRRT.plan``: ``Planner.plan``'s)."""
+    if member.__doc__:
+        return member
+    for base in cls.__mro__[1:]:
+        found = vars(base).get(name)
+        found = found.fget if isinstance(found, property) else found
+        if found is not None and found.__doc__ and base.__module__.startswith("pointplan."):
+            return found
+    return member
+
+
 def _members(cls: type) -> list[tuple[str, Any]]:
     """The public methods and properties a class defines itself, in source order."""
     out = []
@@ -249,7 +262,8 @@ def _object_section(module: str, name: str) -> list[str]:
             lines += ["| member | what it does |", "|---|---|"]
             for mname, member in members:
                 label = f"`{mname}`" if isinstance(member, property) else f"`{mname}()`"
-                summary = _doc(member.fget if isinstance(member, property) else member).split("\n\n")[0]
+                summary = _doc(_documented(obj, mname, member.fget if isinstance(member, property) else member))
+                summary = summary.split("\n\n")[0]
                 lines.append(f"| {label} | {_cell(summary)} |")
             lines.append("")
     return lines

@@ -200,6 +200,8 @@ class RayPool:
         on_result: Callable[[int, Any], None] | None = None,
         shared: Sequence[Any] = (),
     ) -> list[Any]:
+        """``fn(item, *shared)`` of every item on the Ray workers, in order; ``on_result(i,
+        result)`` as each arrives."""
         # ``chunksize`` is accepted for the process pool's signature; chunks are sized by
         # map_ordered (small enough to balance problems of very different costs)
         return map_ordered(
@@ -207,4 +209,5 @@ class RayPool:
         )
 
     def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:
+        """Nothing to release (the pool holds no workers between calls); for the process pool's signature."""
         return None

@@ -110,6 +110,8 @@ class PlanningEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
+        """Start an episode: a random problem of the split, or ``options["problem"]``;
+        returns ``(observation, info)``."""
         super().reset(seed=seed)  # seeds self.np_random, the env's one generator
         problem = (options or {}).get("problem")
         self.core.reset_envs([0], self.np_random, [problem] if problem is not None else None)
@@ -118,6 +120,8 @@ class PlanningEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
     def step(
         self, action: NDArray[np.float32]
     ) -> tuple[dict[str, NDArray[np.float32]], float, bool, bool, dict[str, Any]]:
+        """Move by ``action`` (the motion checked in sub-steps; a collision stops it);
+        returns ``(observation, reward, terminated, truncated, info)``."""
         reward, term, trunc, info = self.core.step(np.asarray(action)[None])
         one = {k: (v[0].item() if isinstance(v[0], np.generic) else v[0]) for k, v in info.items()}
         return self._obs(), float(reward[0]), bool(term[0]), bool(trunc[0]), one
@@ -135,6 +139,7 @@ class PlanningEnv(gym.Env[dict[str, NDArray[np.float32]], NDArray[np.float32]]):
         return self.core.reward(norm, collided, success)
 
     def render(self) -> NDArray[np.uint8] | None:
+        """The problem and the robot as an RGB image (``render_mode="rgb_array"``; else None)."""
         if self.render_mode != "rgb_array":
             return None
         if _renderer is None:
@@ -173,6 +178,9 @@ class PlanningVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.flo
     def reset(
         self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
+        """Start an episode in every environment: random problems, or ``options["problems"]``
+        (one per environment, ``None`` for a random one); ``seed`` an int or one per
+        environment."""
         if isinstance(seed, int) or seed is None:
             super().reset(seed=seed)  # seeds self.np_random, the env's one generator
         else:  # one seed per environment: the generator is drawn from all of them
@@ -184,6 +192,8 @@ class PlanningVectorEnv(VectorEnv[dict[str, NDArray[np.float32]], NDArray[np.flo
     def step(
         self, actions: NDArray[np.float32]
     ) -> tuple[dict[str, NDArray[np.float32]], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Any]]:
+        """Move every environment by its row of ``actions``; an environment whose episode
+        ends starts the next one in the same call (see the class's description)."""
         reward, term, trunc, info = self.core.step(actions)
         done = term | trunc
         infos: dict[str, Any] = dict(info)

@@ -181,6 +181,7 @@ class CollisionWorld:
 
     @property
     def batch_shape(self) -> tuple[int, ...]:
+        """The leading shape of stacked scenes (``()`` for one scene, ``(E,)`` stacked)."""
         return self.box_c.shape[:-2]
 
     def box_arrays(self) -> tuple[Array, Array, Array]:

@@ -40,10 +40,12 @@ class Box:
 
     @property
     def dim(self) -> int:
+        """2 or 3."""
         return int(self.center.shape[0])
 
     @property
     def half(self) -> Array:
+        """The half side lengths."""
         return self.size / 2.0
 
 
@@ -60,6 +62,7 @@ class Sphere:
 
     @property
     def dim(self) -> int:
+        """2 or 3."""
         return int(self.center.shape[0])
 
 
@@ -79,6 +82,7 @@ class Capsule:
 
     @property
     def dim(self) -> int:
+        """2 or 3."""
         return int(self.a.shape[0])
 
 
@@ -101,6 +105,7 @@ class _AxialSolid:
 
     @property
     def dim(self) -> int:
+        """2 or 3."""
         return 3
 
 
@@ -131,6 +136,7 @@ class Mesh:
 
     @property
     def dim(self) -> int:
+        """2 or 3."""
         return 3
 
 
@@ -173,6 +179,7 @@ class PointCloud:
 
     @property
     def dim(self) -> int:
+        """2 or 3."""
         return int(self.points.shape[1])
 
     def point_radius(self) -> float:

@@ -55,7 +55,9 @@ class Planner(Protocol):
 
     name: str
 
-    def plan(self, problem: Problem) -> PlanResult: ...
+    def plan(self, problem: Problem) -> PlanResult:
+        """A path from ``problem.start`` to ``problem.goal``, with the query's statistics."""
+        ...
 
 
 def path_length(robot: Robot, path: Array) -> float:

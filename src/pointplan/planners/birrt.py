@@ -208,6 +208,7 @@ class BiRRT:
 
     # ------------------------------------------------------------------ planning
     def plan(self, problem: Problem) -> PlanResult:
+        """Grow the two trees until they connect or a budget runs out, then shortcut the path."""
         t0 = time.perf_counter()
         rng = np.random.default_rng([self.seed, self.calls])
         self.calls += 1

@@ -66,6 +66,9 @@ class HybridPlanner:
         return f"HybridPlanner(stall_steps={self.policy.stall_steps}, horizon={self.policy.horizon}, fallback={self.fallback!r}, time_limit={self.time_limit})"
 
     def plan(self, problem: Problem) -> PlanResult:
+        """The policy's rollout; where it does not reach the goal, the fallback planner from
+        the pose of that rollout closest to the goal (the path kept up to there), within what
+        is left of the query's time limit."""
         t0 = time.perf_counter()
         first = self.policy.plan(problem)
         end = first.info.get("end")

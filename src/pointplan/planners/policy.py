@@ -122,18 +122,23 @@ class PolicyPlanner:
 
     @property
     def env(self) -> EnvConfig:
+        """The environment settings the rollout observes and moves by (the policy's own)."""
         return self.engine.env
 
     @property
     def horizon(self) -> int:
+        """The most policy steps of one rollout."""
         return self.engine.horizon
 
     @property
     def escape(self) -> Escape:
+        """How the rollout leaves a place where the robot is stuck (``--escape``)."""
         return self.engine.escape
 
     @property
     def stall_steps(self) -> int | None:
+        """The rollout stops when its last this many steps left the robot within
+        ``stall_distance`` of where it was (None: no stall test, the horizon only)."""
         return self.options.stall_steps
 
     @property
@@ -142,6 +147,7 @@ class PolicyPlanner:
         return self.engine.fast
 
     def plan(self, problem: Problem) -> PlanResult:
+        """Roll the policy out from the start, each move certified free, until the goal (or a certified straight edge to it) or the horizon."""
         return self.engine.plan(problem)
 
     def plan_many(self, problems: Sequence[Problem]) -> list[PlanResult]:

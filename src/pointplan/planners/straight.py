@@ -33,6 +33,7 @@ class StraightLine:
         return f"StraightLine(step={self.step}, resolution={self.resolution})"
 
     def plan(self, problem: Problem) -> PlanResult:
+        """The straight edge from start to goal, a success only where it is free."""
         t0 = time.perf_counter()
         robot, scene = self.robot, problem.scene
         length = float(robot.distance(problem.start, problem.goal))

@@ -215,10 +215,12 @@ class ArmRobot(Robot):
     # ------------------------------------------------------------------ joint space
     @property
     def lower(self) -> Array:
+        """The lower joint limits."""
         return self.model.lower
 
     @property
     def upper(self) -> Array:
+        """The upper joint limits."""
         return self.model.upper
 
     def integrate(self, q: Array, v: Array) -> Array:

@@ -95,6 +95,7 @@ class SShape(Robot):
 
     @staticmethod
     def from_matrix(t: Array) -> Array:
+        """Poses ``(..., 7)`` (position, quaternion) of homogeneous matrices ``t: (..., 4, 4)``."""
         t = np.asarray(t, np.float64)
         return np.concatenate([t[..., :3, 3], lie.matrix_to_quat(t[..., :3, :3])], -1)
 

@@ -42,6 +42,7 @@ class JointSpaceScene(Scene):
 
     @property
     def dim(self) -> int:
+        """3: the arm's workspace (its configurations live in joint space)."""
         return 3
 
 

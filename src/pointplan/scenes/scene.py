@@ -33,6 +33,7 @@ class Scene:
 
     @property
     def dim(self) -> int:
+        """2 or 3: the workspace's dimension."""
         return int(self.low.shape[0])
 
     @cached_property
