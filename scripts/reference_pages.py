@@ -29,15 +29,9 @@ def _cell(text: str) -> str:
     return " ".join(text.split()).replace("|", "\\|").replace("<", "&lt;")
 
 
-def _help(action: argparse.Action, prog: str) -> str:
-    """The action's help with argparse's ``%(default)s``-style fields filled in."""
-    if not action.help:
-        return ""
-    params = {k: v for k, v in vars(action).items() if v is not argparse.SUPPRESS}
-    params["prog"] = prog
-    if params.get("choices") is not None:
-        params["choices"] = ", ".join(str(c) for c in params["choices"])
-    return action.help % params
+def _help(parser: argparse.ArgumentParser, action: argparse.Action) -> str:
+    """The action's help with ``%(default)s``-style fields filled in, by argparse itself."""
+    return parser._get_formatter()._expand_help(action) if action.help else ""
 
 
 def _names(parser: argparse.ArgumentParser, action: argparse.Action) -> str:
@@ -52,7 +46,7 @@ def command_section(name: str, p: argparse.ArgumentParser) -> list[str]:
     for action in p._actions:  # argparse has no public list of a parser's arguments
         if isinstance(action, argparse._HelpAction | argparse._VersionAction) or action.help == argparse.SUPPRESS:
             continue
-        rows.append(f"| `{_names(p, action)}` | {_cell(_help(action, p.prog))} |")
+        rows.append(f"| `{_names(p, action)}` | {_cell(_help(p, action))} |")
     if rows:
         lines += ["| argument | meaning |", "|---|---|", *rows, ""]
     if p.epilog:
