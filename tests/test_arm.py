@@ -284,6 +284,24 @@ def test_command_line_plans_evaluates_and_draws_an_arm(tmp_path: Path, capsys: p
     assert "ship for the arms panda, ur5" in capsys.readouterr().err
 
 
+def test_eval_takes_all_of_a_motionbenchmaker_scenario_by_default() -> None:
+    """Without ``--episodes``, ``eval`` runs 400 problems, or all of a fixed set that has
+    fewer (each MotionBenchMaker scenario has 100): asking for 400 of those is an error."""
+    import argparse
+
+    from pointplan.cli import _eval_episodes
+    from pointplan.scenes.scenarios import make_scenario
+
+    mbm = make_scenario("mbm-box", robot="ur5")
+    assert mbm.count == 100 and len(mbm.problems("test", mbm.count)) == 100
+    with pytest.raises(ValueError, match="has 100 problems"):
+        mbm.problems("test", 400)
+    default = argparse.Namespace(episodes=None)
+    assert _eval_episodes(default, mbm) == 100
+    assert _eval_episodes(default, make_scenario("narrow2d")) == 400
+    assert _eval_episodes(argparse.Namespace(episodes=7), mbm) == 7
+
+
 def test_shortcut_probes_keep_the_paths() -> None:
     """Bi-RRT probes a shortcut's stretch with a few plain configurations before its
     certified check: the same paths as without (a certified stretch has no colliding

@@ -74,3 +74,45 @@ def test_arms_guide_plans_on_the_shelf_and_on_what_cameras_see(tmp_path: Path, m
     assert seen.startswith("True PathCheck(ok=True") or (
         seen.startswith("True PathCheck(ok=False") and "touches" in seen
     )
+
+
+# the examples that are fragments: each with the names it takes from the text around it
+FRAGMENTS = {
+    ("docs/guide/arms.md", 1): {"make_planner", "check_path", "panda", "problem"},  # continues the first example
+    ("docs/guide/planners.md", 1): {"problem", "problems"},
+    ("docs/guide/planners.md", 2): {"robot", "problem", "result"},
+    ("docs/guide/scenarios.md", 2): {"rotation", "translation"},
+}
+
+
+def free_names(code: str) -> set[str]:
+    """Names ``code`` reads that it neither imports nor assigns nor defines (nor builtins)."""
+    import ast
+    import builtins
+
+    bound, read = set(dir(builtins)), set()
+    for node in ast.walk(ast.parse(code)):
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            bound |= {(alias.asname or alias.name).split(".")[0] for alias in node.names}
+        elif isinstance(node, ast.Name):
+            (bound if isinstance(node.ctx, ast.Store) else read).add(node.id)
+        elif isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            bound.add(node.name)
+        elif isinstance(node, ast.arg):
+            bound.add(node.arg)
+    return read - bound
+
+
+def test_every_python_example_names_only_what_it_imports_or_defines() -> None:
+    """A reader copies one example at a time: each Python block of README.md and the
+    guide imports or defines every name it uses (the fragments above take the listed
+    names from their text). Catches an example that forgot an import."""
+    pages = ["README.md", *sorted(str(p.relative_to(REPO)) for p in (REPO / "docs/guide").glob("*.md"))]
+    seen = set()
+    for page in pages:
+        for i, code in enumerate(python_blocks(page)):
+            seen.add((page, i))
+            allowed = FRAGMENTS.get((page, i), set())
+            assert free_names(code) <= allowed, f"{page}, Python example {i + 1} uses {free_names(code) - allowed}"
+    assert set(FRAGMENTS) <= seen, "a listed fragment is no longer there"
+    assert free_names("from a import b\nprint(b, c)") == {"c"}

@@ -402,12 +402,12 @@ def _add_common(
     p.add_argument("--scene", help="plan on a scene file (JSON, see docs/guide/scene-files.md) instead of --env")
     p.add_argument(
         "--robot",
-        help="sphere3d, sshape or sshape-oriented (the S-shape told its orientation) for the 3D scenarios (default: sphere3d; sshape for slot), panda or ur5 for mbm-* and armcells, or the robot of a scene file that names none",
+        help="sphere3d, sshape or sshape-oriented (the S-shape told its orientation) for the 3D scenarios (default: sphere3d; sshape for slot), panda (default) or ur5 for mbm-* and armcells, or the robot of a scene file that names none",
     )
     p.add_argument(
         "--planner",
         default=planner_default,
-        help="birrt, straight, policy, hybrid (the policy, then Bi-RRT where it fails), mpnet-nr, mpnet-hr (MPNet with neural or hybrid replanning), lsample-0.5 or lsample-0.9 (Bi-RRT drawing that fraction of its samples from a learned CVAE; learned-sampling is lsample-0.5) or ompl:NAME for an OMPL planner such as ompl:RRTConnect (pip install 'pointplan[ompl]') (default: %(default)s)",
+        help="birrt, straight, policy, hybrid (the policy, then Bi-RRT where it fails), hybrid-ompl (the policy, then OMPL's RRTConnect; pip install 'pointplan[ompl]'), mpnet-nr, mpnet-hr (MPNet with neural or hybrid replanning), lsample-0.5 or lsample-0.9 (Bi-RRT drawing that fraction of its samples from a learned CVAE; learned-sampling is lsample-0.5) or ompl:NAME for an OMPL planner such as ompl:RRTConnect (pip install 'pointplan[ompl]') (default: %(default)s)",
     )
     p.add_argument(
         "--checkpoint",
@@ -513,7 +513,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     _check_checkpoint(args, names)
     _check_writable(args.json, "--json")
     scenario = _scenario(args)
-    problems = _test_problems(scenario, args, args.episodes)
+    problems = _test_problems(scenario, args, _eval_episodes(args, scenario))
     pool = _pool(args)
     results: dict[str, dict[str, Any]] = {}
     records: dict[str, list[dict[str, Any]]] = {}
@@ -569,6 +569,14 @@ def _demo_pool(workers: int, address: str | None) -> WorkerPool | None:
     if wants_ray(workers, address) and ray_available():
         return RayPool(workers if workers > 1 else None, address)
     return None
+
+
+def _eval_episodes(args: argparse.Namespace, scenario: Scenario) -> int:
+    """``eval``'s number of problems: ``--episodes``, else 400, or all of a fixed set's
+    problems where it has fewer (a MotionBenchMaker scenario's 100)."""
+    if args.episodes:
+        return int(args.episodes)
+    return min(400, getattr(scenario, "count", 400))
 
 
 def _test_problems(scenario: Scenario, args: argparse.Namespace, n: int) -> Sequence[Problem]:
@@ -1661,7 +1669,11 @@ def _add_eval_parser(sub: _SubParsersAction[argparse.ArgumentParser]) -> None:
         sub, "eval", "run planners on a seeded set of test problems and print their metrics", epilog=CLAIMS_EPILOG
     )
     _add_common(p)
-    p.add_argument("--episodes", type=positive_int, default=400, help="number of test problems (default: %(default)s)")
+    p.add_argument(
+        "--episodes",
+        type=positive_int,
+        help="number of test problems (default: 400, or all of an mbm-* scenario's problems, 100 each)",
+    )
     p.add_argument("--json", help="write the metrics to this file")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_scale(p)

@@ -179,10 +179,14 @@ class MBMScenario(Scenario):
     def scene(self, split: str, index: int) -> Scene:
         return self.problem(split, index).scene
 
+    @property
+    def count(self) -> int:
+        """How many problems the scenario has for the arm (100 in MotionBenchMaker)."""
+        return problem_count(self.arm, self.scenario)
+
     def problems(self, split: str, n: int, seed: int = 0) -> list[Problem]:
-        count = problem_count(self.arm, self.scenario)
-        if n > count:
-            raise ValueError(f"{self.name} has {count} problems for {self.arm}, not {n}")
+        if n > self.count:
+            raise ValueError(f"{self.name} has {self.count} problems for {self.arm}, not {n}")
         return [self.problem(split, i) for i in range(n)]
 
     @property
