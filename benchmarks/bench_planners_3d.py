@@ -66,7 +66,8 @@ def run_robot(
         t = time.perf_counter()
         _ = p.scene.world
         for pl in built.values():
-            engine = getattr(getattr(pl, "policy", pl), "engine", None)
+            # the policy planner's engine, or the hybrids' policy planner's
+            engine = getattr(pl, "engine", None) or getattr(getattr(pl, "policy", None), "engine", None)
             if engine is not None and engine.one_robot():
                 engine.observer.set_scene(0, p.scene)
         prep.append(time.perf_counter() - t)

@@ -171,18 +171,37 @@ def test_compiled_rollout_hands_an_escape_over_to_the_numpy_one() -> None:
     assert same >= len(probs) - 1, same  # float32 round-off may part a rare rollout
 
 
-@pytest.mark.parametrize("env", ["narrow2d", "boxes3d"])
+def _with_discs_and_capsules(problem: Problem, rng: np.random.Generator) -> Problem:
+    """``problem`` (2D) with three discs and three capsules added, none over its ends."""
+    from pointplan.geometry.collision import CollisionWorld
+    from pointplan.geometry.shapes import Capsule, Shape, Sphere
+    from pointplan.scenes.scene import Scene
+
+    scene, extra = problem.scene, list[Shape]()
+    ends = np.stack([problem.start, problem.goal])
+    while len(extra) < 6:
+        a = rng.uniform(scene.low, scene.high)
+        r = float(rng.uniform(0.01, 0.05))
+        shape = Sphere(a, r) if len(extra) % 2 else Capsule(a, a + rng.normal(size=2) * 0.1, r)
+        if not CollisionWorld.from_shapes([shape], 2).spheres_collide(ends, 0.03).any():
+            extra.append(shape)
+    return Problem(Scene([*scene.obstacles, *extra], scene.low, scene.high), problem.start, problem.goal)
+
+
+@pytest.mark.parametrize("env", ["narrow2d", "boxes3d", "synthetic3d", "narrow2d+discs+capsules"])
 def test_ball_motion_checks_and_march_are_the_numpy_ones(env: str) -> None:
     """The balls' compiled check_motions (one scene; stacked scenes, one motion each),
     march and shortcuts against the numpy and Python ones on the same robot: the same
-    answers, counts, samples and nodes; Bi-RRT plans the same paths either way."""
+    answers, counts, samples and nodes; Bi-RRT plans the same paths either way. Among
+    boxes, and among the other primitives (3D-Synthetic's spheres, capsules, cylinders and
+    cones; discs and capsules in the plane)."""
     from pointplan.geometry.collision import CollisionWorld
     from pointplan.planners.base import march
     from pointplan.planners.birrt import BiRRT
     from pointplan.robots.base import Robot
     from pointplan.scenes.scenarios import make_scenario
 
-    sc = make_scenario(env)
+    sc = make_scenario(env.split("+")[0])
     robot = sc.robot
 
     class Plain(type(robot)):  # type: ignore[misc]
@@ -198,11 +217,15 @@ def test_ball_motion_checks_and_march_are_the_numpy_ones(env: str) -> None:
     plain = Plain()
     problems = sc.problems("test", 6, seed=3)
     rng = np.random.default_rng(5)
+    if "+" in env:
+        problems = [_with_discs_and_capsules(p, rng) for p in problems]
     d = robot.dim
     kinds = set()
     for p in problems:
         world, low, high = p.scene.world, p.scene.low, p.scene.high
-        assert world.boxes_only
+        # the compiled checks apply (boxes alone, or with the other primitives)
+        assert world.primitives_only and world.boxes_only == (env in ("narrow2d", "boxes3d"))
+        assert len(world.ball_prims()) == (0 if world.boxes_only else 13)
         q0 = rng.uniform(low - 0.02, high + 0.02, size=(50, d))
         tw = rng.normal(size=(50, d)) * rng.choice([0.005, 0.05, 0.3], size=(50, 1))
         n = intervals(np.linalg.norm(tw, axis=-1), 0.01)

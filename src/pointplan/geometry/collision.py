@@ -203,6 +203,33 @@ class CollisionWorld:
         )
 
     @property
+    def primitives_only(self) -> bool:
+        """Are all the obstacles boxes, spheres, capsules, cylinders or cones (no meshes or
+        point clouds, in any scene)? The balls' compiled checks take such a single-scene
+        world (:meth:`ball_prims`)."""
+        return not self._has_clouds and not any(self.meshes)
+
+    def ball_prims(self) -> tuple[Array, ...]:
+        """The single scene's spheres, capsules, cylinders and cones as the balls' compiled
+        checks take them (``pointplan.robots._ball_kernels``): contiguous float64
+        ``(sphere centres, radii, capsule ends a, b, radii, cylinder centres, rotations,
+        radii, half lengths, cone centres, rotations, base radii, half heights)``, or
+        ``()`` where there are none (boxes only)."""
+        if self.batch_shape != ():
+            raise ValueError("ball_prims takes a single-scene world")
+        cached: tuple[Array, ...] | None = self.__dict__.get("_ball_prims")
+        if cached is None:
+            arrays = (
+                self.sph_c, self.sph_r, self.cap_a, self.cap_b, self.cap_r,
+                self.cyl_c, self.cyl_r, self.cyl_rad, self.cyl_half,
+                self.con_c, self.con_r, self.con_rad, self.con_half,
+            )  # fmt: skip
+            none = all(a.shape[0] == 0 for a in (self.sph_c, self.cap_a, self.cyl_c, self.con_c))
+            cached = () if none else tuple(np.ascontiguousarray(a, np.float64) for a in arrays)
+            self.__dict__["_ball_prims"] = cached
+        return cached
+
+    @property
     def boxes_and_clouds_only(self) -> bool:
         """Are all the obstacles boxes or point clouds (no spheres, capsules, cylinders,
         cones or meshes, in any scene)? The S-shape's compiled checks take such a

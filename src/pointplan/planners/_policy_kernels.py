@@ -98,7 +98,7 @@ def ball_motion(
     """``check_motions`` of one motion of a ball among boxes: ``(free, collided, checks,
     last free configuration)``."""
     end = np.empty_like(q0)
-    free, hit, checks = _motion(q0, twist, int(n), float(radius), low, high, box_c, box_r, box_h, bool(fallback), end)
+    free, hit, checks = _motion(q0, twist, int(n), float(radius), low, high, (box_c, box_r, box_h), bool(fallback), end)
     return int(free), bool(hit), int(checks), end
 
 
@@ -134,7 +134,7 @@ def _q_free(q, tw, radius, low, high, box_c, box_r, box_h, substep, clip_target,
                 target = q[i] + tw[i]
                 v[i] = min(max(target, low[i]), high[i]) - q[i]
     n = _intervals(_norm(v), substep)
-    free, hit, checks = _motion(q, v, n, radius, low, high, box_c, box_r, box_h, True, new_q)
+    free, hit, checks = _motion(q, v, n, radius, low, high, (box_c, box_r, box_h), True, new_q)
     return hit, checks
 
 
@@ -155,7 +155,7 @@ def _edge_free(a, b, radius, resolution, low, high, box_c, box_r, box_h):  # typ
                 return False, 1
         return True, 1
     m = _intervals(length, resolution)
-    free, hit, checks = _motion(a, v, m, radius, low, high, box_c, box_r, box_h, True, end)
+    free, hit, checks = _motion(a, v, m, radius, low, high, (box_c, box_r, box_h), True, end)
     return free == m, checks
 
 

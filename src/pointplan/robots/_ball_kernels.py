@@ -1,11 +1,22 @@
 """Compiled (numba) kernels of a translating ball (the disc, the sphere) among obstacle
-boxes: the ball against the boxes (:func:`_hits_boxes`, as ``collision.py`` computes it),
-the certified motion check of :func:`pointplan.robots.motion.check_motions` for one motion
+primitives: the ball against boxes (:func:`_hits_boxes`) and against spheres, capsules,
+cylinders and cones (:func:`_hits_prims`), each as ``collision.py`` computes it; the
+certified motion check of :func:`pointplan.robots.motion.check_motions` for one motion
 (:func:`_motion`: the grown samples, the start fallback, the bounds, stopping at the first
 sample that decides it, with the numpy check's answer and count) or a batch
 (:func:`check_motions_balls`), and ``march`` (:func:`march_balls`). The balls'
-``check_motions`` and ``march_compiled`` take them in scenes of boxes; the policy
-planner's kernels (``planners/_policy_kernels.py``) build on them.
+``check_motions`` and ``march_compiled`` take them in scenes of such primitives (no
+meshes or point clouds); the policy planner's kernels (``planners/_policy_kernels.py``)
+build on them, among boxes.
+
+The obstacles travel as a tuple ``obs``: the boxes ``(centres, rotations, half sides)``,
+or those and the other primitives ``(..., prims)`` with ``prims`` as
+:meth:`pointplan.geometry.collision.CollisionWorld.ball_prims` packs them; the version of
+:func:`_ball_hits` is chosen by the tuple's type when the caller is compiled (so a scene
+of boxes runs the same code as before the other primitives were added). numba's cache
+of the callers in other modules does not see edits here: delete their cache files
+(``__pycache__/_shortcut_kernels.*``, ``planners/__pycache__/_policy_kernels.*``) after
+changing this module.
 """
 
 from __future__ import annotations
@@ -14,6 +25,8 @@ import math
 
 import numba
 import numpy as np
+from numba import types
+from numba.extending import overload
 
 #: as in pointplan.robots.motion (literals for the compiler)
 _CONTACT_MARGIN = 1e-5
@@ -43,10 +56,122 @@ def _hits_boxes(p, r2, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _motion(q0, tw, n, radius, low, high, box_c, box_r, box_h, fallback, end):  # type: ignore[no-untyped-def]
-    """check_motions for one motion ``q0 + s tw`` in ``n`` sub-steps: returns ``(free,
-    collided, checks)`` and writes the last free sample (``q0`` when ``free <= 0``) to
-    ``end``."""
+def _dot(a, b, n):  # type: ignore[no-untyped-def]
+    s = a[0] * b[0]
+    for i in range(1, n):
+        s += a[i] * b[i]
+    return s
+
+
+@_jit
+def _segment2_sqdist(px, pz, ax, az, bx, bz):  # type: ignore[no-untyped-def]
+    """collision._segment2_sqdist on floats."""
+    ux, uz = bx - ax, bz - az
+    t = ((px - ax) * ux + (pz - az) * uz) / max(ux * ux + uz * uz, 1e-18)
+    t = min(max(t, 0.0), 1.0)
+    dx, dz = px - ax - t * ux, pz - az - t * uz
+    return dx * dx + dz * dz
+
+
+@_jit
+def _hits_prims(p, r, r2, prims):  # type: ignore[no-untyped-def]
+    """Does the ball at ``p`` of radius ``r`` (``r2 = r * r``) touch one of the spheres,
+    capsules, cylinders or cones of ``prims`` (``CollisionWorld.ball_prims``)? The
+    distances of ``CollisionWorld.spheres_collide``, computed in the same order."""
+    sph_c, sph_r, cap_a, cap_b, cap_r, cyl_c, cyl_r, cyl_rad, cyl_half, con_c, con_r, con_rad, con_half = prims
+    d = p.shape[0]
+    diff = np.empty(d)
+    ab = np.empty(d)
+    for k in range(sph_c.shape[0]):
+        for i in range(d):
+            diff[i] = p[i] - sph_c[k, i]
+        rr = r + sph_r[k]
+        if _dot(diff, diff, d) <= rr * rr:
+            return True
+    for k in range(cap_a.shape[0]):
+        for i in range(d):
+            ab[i] = cap_b[k, i] - cap_a[k, i]
+            diff[i] = p[i] - cap_a[k, i]
+        denom = max(_dot(ab, ab, d), 1e-18)
+        t = min(max(_dot(diff, ab, d) / denom, 0.0), 1.0)
+        for i in range(d):
+            diff[i] = diff[i] - t * ab[i]
+        rr = r + cap_r[k]
+        if _dot(diff, diff, d) <= rr * rr:
+            return True
+    if d == 3:
+        for k in range(cyl_c.shape[0] + con_c.shape[0]):
+            cone = k >= cyl_c.shape[0]
+            j = k - cyl_c.shape[0] if cone else k
+            c, rot = (con_c, con_r) if cone else (cyl_c, cyl_r)
+            l0 = (p[0] - c[j, 0]) * rot[j, 0, 0] + (p[1] - c[j, 1]) * rot[j, 1, 0] + (p[2] - c[j, 2]) * rot[j, 2, 0]
+            l1 = (p[0] - c[j, 0]) * rot[j, 0, 1] + (p[1] - c[j, 1]) * rot[j, 1, 1] + (p[2] - c[j, 2]) * rot[j, 2, 1]
+            z = (p[0] - c[j, 0]) * rot[j, 0, 2] + (p[1] - c[j, 1]) * rot[j, 1, 2] + (p[2] - c[j, 2]) * rot[j, 2, 2]
+            rho = math.sqrt(l0 * l0 + l1 * l1)
+            if not cone:
+                dr = max(rho - cyl_rad[j], 0.0)
+                dz = max(abs(z) - cyl_half[j], 0.0)
+                if dr * dr + dz * dz <= r2:
+                    return True
+                continue
+            rad, h = con_rad[j], con_half[j]
+            if z >= -h and z <= h and rho * 2.0 * h <= rad * (h - z):
+                return True
+            d_base = _segment2_sqdist(rho, z, 0.0, -h, rad, -h)
+            d_side = _segment2_sqdist(rho, z, rad, -h, 0.0, h)
+            if min(d_base, d_side) <= r2:
+                return True
+    return False
+
+
+def _ball_hits(p, r, r2, obs):  # type: ignore[no-untyped-def]
+    """Does the ball at ``p`` of radius ``r`` (``r2 = r * r``) touch an obstacle of
+    ``obs`` (boxes, or boxes and ``prims``)? Compiled callers only (the version is chosen
+    by the tuple's length)."""
+    raise NotImplementedError("_ball_hits is called from compiled code only")
+
+
+@overload(_ball_hits, jit_options={"nogil": True})
+def _ball_hits_impl(p, r, r2, obs):  # type: ignore[no-untyped-def]
+    if isinstance(obs, types.BaseTuple) and len(obs) == 4:
+
+        def boxes_and_prims(p, r, r2, obs):  # type: ignore[no-untyped-def]
+            return _hits_boxes(p, r2, obs[0], obs[1], obs[2]) or _hits_prims(p, r, r2, obs[3])
+
+        return boxes_and_prims
+
+    def boxes(p, r, r2, obs):  # type: ignore[no-untyped-def]
+        return _hits_boxes(p, r2, obs[0], obs[1], obs[2])
+
+    return boxes
+
+
+def _obstacles(box_c, box_r, box_h, prims):  # type: ignore[no-untyped-def]
+    """``obs`` of boxes and ``prims``: the boxes alone where ``prims`` is ``()``.
+    Compiled callers only."""
+    raise NotImplementedError("_obstacles is called from compiled code only")
+
+
+@overload(_obstacles, jit_options={"nogil": True})
+def _obstacles_impl(box_c, box_r, box_h, prims):  # type: ignore[no-untyped-def]
+    if isinstance(prims, types.BaseTuple) and len(prims) == 0:
+
+        def boxes(box_c, box_r, box_h, prims):  # type: ignore[no-untyped-def]
+            return (box_c, box_r, box_h)
+
+        return boxes
+
+    def with_prims(box_c, box_r, box_h, prims):  # type: ignore[no-untyped-def]
+        return (box_c, box_r, box_h, prims)
+
+    return with_prims
+
+
+@_jit
+def _motion(q0, tw, n, radius, low, high, obs, fallback, end):  # type: ignore[no-untyped-def]
+    """check_motions for one motion ``q0 + s tw`` in ``n`` sub-steps among the obstacles
+    ``obs``: returns ``(free, collided, checks)`` and writes the last free sample (``q0``
+    when ``free <= 0``) to ``end``."""
     d = q0.shape[0]
     seg2 = 0.0
     for i in range(d):
@@ -62,7 +187,7 @@ def _motion(q0, tw, n, radius, low, high, box_c, box_r, box_h, fallback, end):  
         s = min(j / n, 1.0)
         for i in range(d):
             cfg[i] = q0[i] + tw[i] * s
-        bad = _hits_boxes(cfg, r2g, box_c, box_r, box_h)
+        bad = _ball_hits(cfg, rg, r2g, obs)
         if j == 0 and bad and fallback:
             r0 = np.sqrt(radius * radius + (0.0 * 0.0) * seg2) + _CONTACT_MARGIN
             r1 = np.sqrt(radius * radius + (1.0 * 1.0) * seg2) + _CONTACT_MARGIN
@@ -70,9 +195,7 @@ def _motion(q0, tw, n, radius, low, high, box_c, box_r, box_h, fallback, end):  
             s1 = min(1 / n, 1.0)
             for i in range(d):
                 cfg1[i] = q0[i] + tw[i] * s1
-            if not _hits_boxes(cfg, r0 * r0, box_c, box_r, box_h) and not _hits_boxes(
-                cfg1, r1 * r1, box_c, box_r, box_h
-            ):
+            if not _ball_hits(cfg, r0, r0 * r0, obs) and not _ball_hits(cfg1, r1, r1 * r1, obs):
                 bad = False
             checks += 2
         out = False
@@ -89,17 +212,19 @@ def _motion(q0, tw, n, radius, low, high, box_c, box_r, box_h, fallback, end):  
 
 
 @_jit
-def check_motions_balls(q0, tw, n, fallback, low, high, radius, box_c, box_r, box_h, stacked, configs, out):  # type: ignore[no-untyped-def]
+def check_motions_balls(q0, tw, n, fallback, low, high, radius, box_c, box_r, box_h, prims, stacked, configs, out):  # type: ignore[no-untyped-def]
     """:func:`_motion` for motions ``q0 (N, d)``, ``tw (N, d)`` in ``n (N,)`` sub-steps,
     ``fallback (N,)``, bounds ``low, high (N, d)``, against the boxes of one scene (``(1,
-    K, ...)``) or of scene ``i`` for motion ``i`` (``stacked``): writes every sample
+    K, ...)``) and its other primitives ``prims`` (``()``: none), or the boxes of scene
+    ``i`` for motion ``i`` (``stacked``, ``prims = ()``): writes every sample
     ``configs (N, J, d)`` (past a motion's ``n`` its end) and ``out (N, 3)``: certified
     sub-steps, collided (0 or 1), checks."""
     nm, nj, d = configs.shape
     end = np.empty(d)
     for i in range(nm):
         s = i if stacked else 0
-        k, hit, c = _motion(q0[i], tw[i], n[i], radius, low[i], high[i], box_c[s], box_r[s], box_h[s], fallback[i], end)
+        obs = _obstacles(box_c[s], box_r[s], box_h[s], prims)
+        k, hit, c = _motion(q0[i], tw[i], n[i], radius, low[i], high[i], obs, fallback[i], end)
         out[i, 0], out[i, 1], out[i, 2] = k, hit, c
         for j in range(nj):
             f = min(j / n[i], 1.0)
@@ -108,9 +233,9 @@ def check_motions_balls(q0, tw, n, fallback, low, high, radius, box_c, box_r, bo
 
 
 @_jit
-def march_balls(q0, q1, v, step, resolution, max_steps, low, high, radius, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
+def march_balls(q0, q1, v, step, resolution, max_steps, low, high, radius, box_c, box_r, box_h, prims):  # type: ignore[no-untyped-def]
     """``pointplan.planners.base.march`` of the segment ``q0 -> q1`` (``v = q1 - q0``) for a
-    ball among boxes, edge by edge until the first blocked one: ``(nodes, reached,
+    ball among boxes and the other primitives ``prims`` (``()``: none), edge by edge until the first blocked one: ``(nodes, reached,
     checks)`` as the numpy march gives them."""
     dim = q0.shape[0]
     d = 0.0
@@ -134,13 +259,14 @@ def march_balls(q0, q1, v, step, resolution, max_steps, low, high, radius, box_c
             starts[e, i] = q0[i] + v[i] * ends[e]
     edge = np.empty(dim)
     end = np.empty(dim)
+    obs = _obstacles(box_c, box_r, box_h, prims)
     checks, n_free = 0, n
     for e in range(n):
         frac = ends[e + 1] - ends[e]
         m = max(1, math.ceil(frac * d / resolution - _GRID_SLACK))
         for i in range(dim):
             edge[i] = v[i] * frac
-        k, _, c = _motion(starts[e], edge, m, radius, low, high, box_c, box_r, box_h, e == 0, end)
+        k, _, c = _motion(starts[e], edge, m, radius, low, high, obs, e == 0, end)
         checks += c
         if k < m:
             n_free = e

@@ -16,7 +16,7 @@ import math
 import numba
 import numpy as np
 
-from ._ball_kernels import _motion
+from ._ball_kernels import _motion, _obstacles
 from ._body_kernels import _check_motion, _integrate, _log, _scratch
 from ._body_kernels import _norm as _length
 
@@ -45,7 +45,7 @@ def _geo_log(kind, a, b, out):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _segments_free(kind, verts, k, resolution, low, high, radius, body, boxes, ws):  # type: ignore[no-untyped-def]
+def _segments_free(kind, verts, k, resolution, low, high, radius, body, boxes, prims, ws):  # type: ignore[no-untyped-def]
     """``segments_free`` of the ``k - 1`` geodesics ``verts[e] -> verts[e + 1]``:
     ``(all free, configurations checked)`` (every segment checked and counted)."""
     tdim = 6 if kind == 1 else verts.shape[1]
@@ -56,7 +56,8 @@ def _segments_free(kind, verts, k, resolution, low, high, radius, body, boxes, w
         _geo_log(kind, verts[e], verts[e + 1], v)
         m = max(1, math.ceil(_length(v) / resolution - _GRID_SLACK))
         if kind == 0:
-            free, _, c = _motion(verts[e], v, m, radius, low, high, boxes[0], boxes[1], boxes[2], True, last)
+            obs = _obstacles(boxes[0], boxes[1], boxes[2], prims)
+            free, _, c = _motion(verts[e], v, m, radius, low, high, obs, True, last)
         else:
             free, _, c = _check_motion(verts[e], v, m, True, low, high, body, boxes, ws, last)
         checks += c
@@ -72,9 +73,11 @@ def _locate(cum, x, n_seg):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def shortcut_path(kind, path0, tw0, u, resolution, low, high, radius, body, boxes):  # type: ignore[no-untyped-def]
+def shortcut_path(kind, path0, tw0, u, resolution, low, high, radius, body, boxes, prims=()):  # type: ignore[no-untyped-def]
     """``BiRRT.shortcut`` on ``path0 (L, c)`` with its segments' twists ``tw0 (L - 1, t)``,
-    ``len(u) // 2`` iterations: returns ``(path, checks)``."""
+    ``len(u) // 2`` iterations: returns ``(path, checks)``. ``boxes``: the obstacles as
+    the robot's motion check takes them; ``prims``: the ball's other primitives
+    (``CollisionWorld.ball_prims``; ``()``: none, and always for the body)."""
     iters = u.shape[0] // 2
     c, t = path0.shape[1], tw0.shape[1]
     cap = path0.shape[0] + iters + 2
@@ -116,7 +119,7 @@ def shortcut_path(kind, path0, tw0, u, resolution, low, high, radius, body, boxe
             k += 1
         verts[k] = path[j + 1]
         k += 1
-        ok, used = _segments_free(kind, verts, k, resolution, low, high, radius, body, boxes, ws)
+        ok, used = _segments_free(kind, verts, k, resolution, low, high, radius, body, boxes, prims, ws)
         checks += used
         if not ok:
             continue

@@ -83,22 +83,25 @@ class _Ball(Robot):
         high: Array | None = None,
         fallback: Bool | None = None,
     ) -> MotionCheck:
-        """:meth:`Robot.check_motions`, compiled where every obstacle is a box
+        """:meth:`Robot.check_motions`, compiled where every obstacle is a box, sphere,
+        capsule, cylinder or cone (stacked scenes: boxes only)
         (:func:`pointplan.robots._ball_kernels.check_motions_balls`: the same answers,
         counts and samples); otherwise the numpy check."""
         q0 = np.asarray(q0, np.float64)
         lead = q0.shape[:-1]
         stacked = world.batch_shape != ()
-        if not world.boxes_only or (stacked and lead != world.batch_shape):
+        if not (world.boxes_only or (not stacked and world.primitives_only)) or (stacked and lead != world.batch_shape):
             return super().check_motions(world, q0, twist, n, low, high, fallback)
         f = np.ascontiguousarray
         fm = FlatMotions.of(q0, twist, n, low, high, fallback, self.dim, self.dim)
         bc, br, bh = (f(a, np.float64) for a in (world.box_c, world.box_r, world.box_h))
         if not stacked:
             bc, br, bh = bc[None], br[None], bh[None]
+        prims = () if stacked else world.ball_prims()
         _ball_kernels.check_motions_balls(
-            fm.q0, fm.twist, fm.n, fm.fallback, fm.low, fm.high, self.radius, bc, br, bh, stacked, fm.configs, fm.out
-        )
+            fm.q0, fm.twist, fm.n, fm.fallback, fm.low, fm.high, self.radius, bc, br, bh, prims, stacked, fm.configs,
+            fm.out,
+        )  # fmt: skip
         return fm.result()
 
     def shortcut_compiled(
@@ -112,15 +115,16 @@ class _Ball(Robot):
         high: Array,
     ) -> tuple[Array, int] | None:
         """Bi-RRT's shortcutting in one compiled call where every obstacle of the
-        (single-scene) world is a box (:func:`pointplan.robots._shortcut_kernels.shortcut_path`:
-        the same path and counts as the Python loop); ``None`` otherwise."""
-        if world.batch_shape != () or not world.boxes_only:
+        (single-scene) world is a box, sphere, capsule, cylinder or cone
+        (:func:`pointplan.robots._shortcut_kernels.shortcut_path`: the same path and counts
+        as the Python loop); ``None`` otherwise."""
+        if world.batch_shape != () or not world.primitives_only:
             return None
         f = np.ascontiguousarray
         boxes = world.box_arrays()
         out, checks = shortcut_path(
             0, f(path, np.float64), f(twists, np.float64), f(u, np.float64), float(resolution),
-            f(low, np.float64), f(high, np.float64), self.radius, _NO_BODY, boxes,
+            f(low, np.float64), f(high, np.float64), self.radius, _NO_BODY, boxes, world.ball_prims(),
         )  # fmt: skip
         return out, int(checks)
 
@@ -137,14 +141,15 @@ class _Ball(Robot):
         high: Array,
     ) -> tuple[Array, bool, int] | None:
         """``march`` in one compiled call where every obstacle of the (single-scene) world
-        is a box (:func:`pointplan.robots._ball_kernels.march_balls`); ``None`` otherwise."""
-        if world.batch_shape != () or not world.boxes_only:
+        is a box, sphere, capsule, cylinder or cone
+        (:func:`pointplan.robots._ball_kernels.march_balls`); ``None`` otherwise."""
+        if world.batch_shape != () or not world.primitives_only:
             return None
         f = np.ascontiguousarray
         nodes, reached, checks = _ball_kernels.march_balls(
             f(q0, np.float64), f(q1, np.float64), f(v, np.float64), float(step), float(resolution),
             -1 if max_steps is None else int(max_steps), f(low, np.float64), f(high, np.float64), self.radius,
-            *world.box_arrays(),
+            *world.box_arrays(), world.ball_prims(),
         )  # fmt: skip
         return nodes, bool(reached), int(checks)
 
