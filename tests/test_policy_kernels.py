@@ -189,7 +189,7 @@ def _with_discs_and_capsules(problem: Problem, rng: np.random.Generator) -> Prob
 
 
 @pytest.mark.parametrize("env", ["narrow2d", "boxes3d", "synthetic3d", "narrow2d+discs+capsules"])
-def test_ball_motion_checks_and_march_are_the_numpy_ones(env: str) -> None:
+def test_ball_motion_checks_and_march_are_the_numpy_ones(env: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """The balls' compiled check_motions (one scene; stacked scenes, one motion each),
     march and shortcuts against the numpy and Python ones on the same robot: the same
     answers, counts, samples and nodes; Bi-RRT plans the same paths either way. Among
@@ -214,6 +214,20 @@ def test_ball_motion_checks_and_march_are_the_numpy_ones(env: str) -> None:
         def shortcut_compiled(self, *a: object) -> None:
             return None
 
+    from pointplan.robots import _ball_kernels, point
+
+    ran: dict[str, int] = {}
+
+    def spy(name: str, fn: Callable[..., object]) -> Callable[..., object]:
+        def counted(*a: object) -> object:
+            ran[name] = ran.get(name, 0) + 1
+            return fn(*a)
+
+        return counted
+
+    for name in ("check_motions_balls", "march_balls"):
+        monkeypatch.setattr(_ball_kernels, name, spy(name, getattr(_ball_kernels, name)))
+    monkeypatch.setattr(point, "shortcut_path", spy("shortcut_path", point.shortcut_path))
     plain = Plain()
     problems = sc.problems("test", 6, seed=3)
     rng = np.random.default_rng(5)
@@ -264,3 +278,44 @@ def test_ball_motion_checks_and_march_are_the_numpy_ones(env: str) -> None:
         assert ra.path.shape == rb.path.shape and np.allclose(ra.path, rb.path, rtol=0, atol=1e-12)
         shortened += ra.success and len(ra.path) < len(ra.raw_path)
     assert shortened > 0
+    # the compiled checks, march and shortcuts ran (the robot's; the plain one has none)
+    assert set(ran) == {"check_motions_balls", "march_balls", "shortcut_path"}, ran
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_ball_against_primitives_decides_ties_as_numpy(dim: int) -> None:
+    """The compiled ball-against-primitive test (``_hits_prims``) and
+    ``CollisionWorld.spheres_collide`` give the same verdict on balls that just touch a
+    sphere, capsule, cylinder or cone (radii found by bisection on numpy's test, so that the
+    last bit of the distance decides): both compute in the same order."""
+    from pointplan.geometry import lie
+    from pointplan.geometry.collision import CollisionWorld
+    from pointplan.geometry.shapes import Capsule, Cone, Cylinder, Shape, Sphere
+    from pointplan.robots._ball_kernels import _hits_prims
+
+    rng = np.random.default_rng(11)
+    kinds = ["sphere", "capsule"] + (["cylinder", "cone"] if dim == 3 else [])
+    hits = 0
+    for kind in kinds:
+        for _ in range(400):
+            c, rot = rng.normal(size=dim), lie.random_rotations(rng, 1)[0]
+            size, length = float(rng.uniform(0.0, 0.3)), float(rng.uniform(0.05, 0.6))
+            shape: Shape
+            if kind == "sphere":
+                shape = Sphere(c, size)
+            elif kind == "capsule":
+                shape = Capsule(c, c + rng.normal(size=dim) * 0.3, size)
+            else:
+                shape = (Cylinder if kind == "cylinder" else Cone)(c, size + 0.01, length, rot)
+            world = CollisionWorld.from_shapes([shape], dim)
+            p = c + rng.normal(size=dim) * 0.5
+            # the radius at which the ball starts to touch, to the last bit, by numpy's test
+            lo, hi = 0.0, 3.0
+            for _ in range(64):
+                mid = (lo + hi) / 2
+                lo, hi = (lo, mid) if world.spheres_collide(p[None], mid)[0] else (mid, hi)
+            for r in (lo, hi, np.nextafter(lo, 0.0), np.nextafter(hi, 4.0)):
+                want = bool(world.spheres_collide(p[None], r)[0])
+                assert bool(_hits_prims(p, float(r), float(r) * float(r), world.ball_prims())) == want, (kind, r)
+                hits += want
+    assert hits > 0

@@ -53,20 +53,29 @@ def sphere_box_sqdist(c: Array, bc: Array, br: Array, bh: Array) -> Array:
     return out
 
 
+def _dot_last(x: Array, y: Array) -> Array:
+    """``sum_i x_i y_i`` over the last axis (broadcast), added in axis order: the order the
+    compiled kernels add in (einsum's order depends on numpy's vector code)."""
+    out = x[..., 0] * y[..., 0]
+    for i in range(1, x.shape[-1]):
+        out = out + x[..., i] * y[..., i]
+    return out
+
+
 def sphere_sphere_sqdist(c: Array, sc: Array) -> Array:
     """Squared centre distances ``(..., M, K)``."""
     diff = c[..., :, None, :] - sc[..., None, :, :]
-    return np.einsum("...i,...i->...", diff, diff)
+    return _dot_last(diff, diff)
 
 
 def point_segment_sqdist(c: Array, a: Array, b: Array) -> Array:
     """Squared distance from points ``(..., M, d)`` to segments ``a, b: (..., K, d)``."""
     ab = b - a
-    denom = np.maximum(np.einsum("...i,...i->...", ab, ab), 1e-18)
+    denom = np.maximum(_dot_last(ab, ab), 1e-18)
     ac = c[..., :, None, :] - a[..., None, :, :]
-    t = np.clip(np.einsum("...mki,...ki->...mk", ac, ab) / denom[..., None, :], 0.0, 1.0)
+    t = np.clip(_dot_last(ac, ab[..., None, :, :]) / denom[..., None, :], 0.0, 1.0)
     d = ac - t[..., None] * ab[..., None, :, :]
-    return np.einsum("...i,...i->...", d, d)
+    return _dot_last(d, d)
 
 
 def point_cylinder_sqdist(c: Array, cc: Array, cr: Array, rad: Array, half: Array) -> Array:

@@ -142,7 +142,7 @@ class OMPLPlanner:
         self.simplify = bool(simplify)
         self.motion_check = motion_check
         #: kinds of world whose checks this planner has made once (see ``_warm_up``)
-        self._warm: set[tuple[str, bool]] = set()
+        self._warm: set[tuple[object, ...]] = set()
         if seed is not None:
             _ompl()[2].RNG.setSeed(int(seed))
 
@@ -193,7 +193,9 @@ class OMPLPlanner:
         fresh install: seconds, more than the default 1 s budget; from numba's disk cache
         0.4 s), which is not planning time. The query's ``time_s`` includes them."""
         world = problem.scene.world
-        kind = (type(world).__name__, bool(getattr(world, "boxes_only", False)))
+        kind = tuple(
+            [type(world).__name__] + [bool(getattr(world, k, False)) for k in ("boxes_only", "primitives_only")]
+        )
         if kind in self._warm:
             return
         self._warm.add(kind)
