@@ -63,6 +63,27 @@ def test_edge_check_is_edge_free_and_the_quick_test_is_necessary(problems: list[
     assert seen[True] > 20 and seen[False] > 20
 
 
+def test_the_quick_goal_test_is_necessary_among_primitives() -> None:
+    """Among spheres, capsules, cylinders and cones (3D-Synthetic) too, a segment the quick
+    test rules out is one the certified edge check finds blocked."""
+    from pointplan.scenes.scenarios import make_scenario
+
+    sc = make_scenario("synthetic3d", robot="sphere3d")
+    robot, rng = sc.robot, np.random.default_rng(2)
+    ruled_out = 0
+    for p in sc.problems("test", 8, seed=0):
+        world = p.scene.world
+        for _ in range(60):
+            a, b = rng.uniform(p.scene.low, p.scene.high, size=(2, 3))
+            ok, _ = edge_free(robot, p.scene, a, b, 0.01)
+            hit, _ = K.ball_segment_hits_boxes_count(
+                a, b, robot.radius * (1 - 1e-9), 0.01, *_boxes(p), world.ball_prims()
+            )
+            assert not (hit and ok)
+            ruled_out += hit
+    assert ruled_out > 50
+
+
 def test_compiled_action_matches_the_numpy_actor(problems: list[Problem]) -> None:
     robot = Narrow2DScenario().robot
     planner = make_planner("policy", robot)
@@ -108,6 +129,30 @@ def test_compiled_rollout_is_the_python_one(problems: list[Problem]) -> None:
             ):
                 same += 1
         assert same >= len(problems) - 1  # float32 round-off may part a rare failing rollout
+
+
+def test_the_sphere_among_primitives_rolls_out_compiled_as_the_step_loop() -> None:
+    """In 3D-Synthetic (spheres, capsules, cylinders and cones) the sphere's compiled
+    rollout applies (goal tests, moves and edges among the primitives) and gives the step
+    loop's results: the same ends, nodes, checks and paths; with its escape and without."""
+    from pointplan.scenes.scenarios import make_scenario
+
+    sc = make_scenario("synthetic3d", robot="sphere3d")
+    problems = sc.problems("test", 12, seed=1)
+    assert any(not p.scene.world.boxes_only for p in problems)
+    for kw in ({"escape": 0}, {}):
+        a = make_planner("policy", sc.robot, observation="global", **kw)
+        b = make_planner("policy", sc.robot, observation="global", compiled=False, **kw)
+        for p in problems:
+            ra, rb = a.plan(p), b.plan(p)
+            assert "compiled" in ra.info["time_split"] and "compiled" not in rb.info["time_split"]
+            assert (ra.success, ra.nodes, ra.collision_checks, ra.info["end"]) == (
+                rb.success,
+                rb.nodes,
+                rb.collision_checks,
+                rb.info["end"],
+            )
+            assert ra.path.shape == rb.path.shape and np.allclose(ra.path, rb.path, atol=1e-5, rtol=0)
 
 
 def test_compiled_plan_keeps_no_state_between_problems(problems: list[Problem]) -> None:

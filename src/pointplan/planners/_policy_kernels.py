@@ -23,10 +23,14 @@ for a translating ball (the 2D disc, the 3D sphere) among boxes.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numba
 import numpy as np
+from numba import types
+from numba.extending import overload
 
-from ..robots._ball_kernels import _hits_boxes, _motion
+from ..robots._ball_kernels import _ball_hits, _hits_prims, _motion, _obstacles
 
 #: as in pointplan.robots.motion (repeated as a literal for the compiler)
 _GRID_SLACK = 1e-9
@@ -43,7 +47,47 @@ _jit_fast = numba.njit(cache=True, nogil=True, fastmath=True)
 
 # ------------------------------------------------------------------ collision tests
 @_jit
-def _segment_hits(a, b, radius, spacing, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
+def _overlaps_boxes(p, r2, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
+    """Does the ball at ``p`` overlap a box (squared distance below ``r2``)?"""
+    d = p.shape[0]
+    for k in range(box_c.shape[0]):
+        dist2 = 0.0
+        for i in range(d):  # local coordinate i: column i of the box rotation
+            loc = 0.0
+            for m in range(d):
+                loc += (p[m] - box_c[k, m]) * box_r[k, m, i]
+            ex = abs(loc) - box_h[k, i]
+            if ex > 0.0:
+                dist2 += ex * ex
+        if dist2 < r2:
+            return True
+    return False
+
+
+def _overlaps(p, radius, r2, obs):  # type: ignore[no-untyped-def]
+    """Does the ball at ``p`` overlap (distance below ``radius``) an obstacle of ``obs``
+    (``pointplan.robots._ball_kernels``: boxes, or boxes and the other primitives)?
+    Compiled callers only."""
+    raise NotImplementedError("_overlaps is called from compiled code only")
+
+
+@overload(_overlaps, jit_options={"nogil": True})
+def _overlaps_impl(p, radius, r2, obs):  # type: ignore[no-untyped-def]
+    if isinstance(obs, types.BaseTuple) and len(obs) == 4:
+
+        def boxes_and_prims(p, radius, r2, obs):  # type: ignore[no-untyped-def]
+            return _overlaps_boxes(p, r2, obs[0], obs[1], obs[2]) or _hits_prims(p, radius, r2, obs[3], True)
+
+        return boxes_and_prims
+
+    def boxes(p, radius, r2, obs):  # type: ignore[no-untyped-def]
+        return _overlaps_boxes(p, r2, obs[0], obs[1], obs[2])
+
+    return boxes
+
+
+@_jit
+def _segment_hits(a, b, radius, spacing, obs):  # type: ignore[no-untyped-def]
     d = a.shape[0]
     length2 = 0.0
     for i in range(d):
@@ -57,29 +101,29 @@ def _segment_hits(a, b, radius, spacing, box_c, box_r, box_h):  # type: ignore[n
         s = j / n
         for i in range(d):
             p[i] = a[i] + s * (b[i] - a[i])
-        for k in range(box_c.shape[0]):
-            dist2 = 0.0
-            for i in range(d):  # local coordinate i: column i of the box rotation
-                loc = 0.0
-                for m in range(d):
-                    loc += (p[m] - box_c[k, m]) * box_r[k, m, i]
-                ex = abs(loc) - box_h[k, i]
-                if ex > 0.0:
-                    dist2 += ex * ex
-            if dist2 < r2:
-                return True, j + 1
+        if _overlaps(p, radius, r2, obs):
+            return True, j + 1
     return False, n + 1
 
 
 def ball_segment_hits_boxes_count(
-    a: np.ndarray, b: np.ndarray, radius: float, spacing: float, box_c: np.ndarray, box_r: np.ndarray, box_h: np.ndarray
+    a: np.ndarray,
+    b: np.ndarray,
+    radius: float,
+    spacing: float,
+    box_c: np.ndarray,
+    box_r: np.ndarray,
+    box_h: np.ndarray,
+    prims: tuple[np.ndarray, ...] = (),
 ) -> tuple[bool, int]:
     """Does a ball of ``radius`` centred at one of the points ``a + (j / n) (b - a)``,
     ``n = ceil(|b - a| / spacing)``, overlap (distance below ``radius``) one of the boxes
     ``box_c: (K, d)``, ``box_r: (K, d, d)`` (columns are the box axes), ``box_h: (K, d)``
-    (half sides)? Returns the answer and the number of sample points tested (up to the
-    first hit)."""
-    hit, n = _segment_hits(a, b, float(radius), float(spacing), box_c, box_r, box_h)
+    (half sides), or one of the other primitives ``prims``
+    (``CollisionWorld.ball_prims``)? Returns the answer and the number of sample points
+    tested (up to the first hit)."""
+    obs = (box_c, box_r, box_h, prims) if prims else (box_c, box_r, box_h)
+    hit, n = _segment_hits(a, b, float(radius), float(spacing), obs)
     return bool(hit), int(n)
 
 
@@ -117,7 +161,7 @@ def _norm(v):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _q_free(q, tw, radius, low, high, box_c, box_r, box_h, substep, clip_target, new_q):  # type: ignore[no-untyped-def]
+def _q_free(q, tw, radius, low, high, obs, substep, clip_target, new_q):  # type: ignore[no-untyped-def]
     """``pointplan.envs.core.q_free`` for one move: writes the end to ``new_q``, returns
     ``(collided, checks)``."""
     d = q.shape[0]
@@ -134,12 +178,12 @@ def _q_free(q, tw, radius, low, high, box_c, box_r, box_h, substep, clip_target,
                 target = q[i] + tw[i]
                 v[i] = min(max(target, low[i]), high[i]) - q[i]
     n = _intervals(_norm(v), substep)
-    free, hit, checks = _motion(q, v, n, radius, low, high, (box_c, box_r, box_h), True, new_q)
+    free, hit, checks = _motion(q, v, n, radius, low, high, obs, True, new_q)
     return hit, checks
 
 
 @_jit
-def _edge_free(a, b, radius, resolution, low, high, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
+def _edge_free(a, b, radius, resolution, low, high, obs):  # type: ignore[no-untyped-def]
     """``pointplan.planners.edges.edge_free`` for a ball among boxes: ``(free, checks)``."""
     d = a.shape[0]
     v = np.empty(d)
@@ -148,14 +192,14 @@ def _edge_free(a, b, radius, resolution, low, high, box_c, box_r, box_h):  # typ
     length = _norm(v)
     end = np.empty(d)
     if length <= 1e-12:  # check_free of the configuration itself (plain ball, bounds)
-        if _hits_boxes(a, radius * radius, box_c, box_r, box_h):
+        if _ball_hits(a, radius, radius * radius, obs):
             return False, 1
         for i in range(d):
             if not (a[i] >= low[i] - 1e-9 and a[i] <= high[i] + 1e-9):  # in_bounds' eps
                 return False, 1
         return True, 1
     m = _intervals(length, resolution)
-    free, hit, checks = _motion(a, v, m, radius, low, high, (box_c, box_r, box_h), True, end)
+    free, hit, checks = _motion(a, v, m, radius, low, high, obs, True, end)
     return free == m, checks
 
 
@@ -171,7 +215,7 @@ def ball_edge_free(
     box_h: np.ndarray,
 ) -> tuple[bool, int]:
     """``edge_free`` of a ball among boxes (see :func:`_edge_free`)."""
-    ok, n = _edge_free(a, b, float(radius), float(resolution), low, high, box_c, box_r, box_h)
+    ok, n = _edge_free(a, b, float(radius), float(resolution), low, high, (box_c, box_r, box_h))
     return bool(ok), int(n)
 
 
@@ -446,7 +490,9 @@ I_HORIZON, I_STALL_STEPS, I_GREEDY, I_CONNECT, I_CLIP, I_N_POINTS, I_ACTION_DIM,
 
 
 @_jit
-def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, scale, fparams, iparams, stream, path):  # type: ignore[no-untyped-def]
+def _rollout(  # type: ignore[no-untyped-def]
+    q0, goal, low, high, box_c, box_r, box_h, prims, pts, nrm, wflat, layout, scale, fparams, iparams, stream, path
+):
     """A rollout of ``PolicyPlanner.plan`` (see :func:`rollout_ball`): writes the path to
     ``path`` (``horizon + 2`` rows: the policy's configurations, then the goal when the
     path ends there) and returns ``(end code, rows of path, checks, certified goal
@@ -466,6 +512,7 @@ def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, 
     tw = np.empty(d)
     new_q = np.empty(d)
     filt_r = radius * (1.0 - 1e-9)
+    obs = _obstacles(box_c, box_r, box_h, prims)
     for i in range(d):
         path[0, i] = q0[i]
     checks = 0
@@ -475,10 +522,10 @@ def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, 
     while True:
         q = path[t]
         if greedy:  # is the straight edge to the goal free from here?
-            hit, c = _segment_hits(q, goal, filt_r, resolution, box_c, box_r, box_h)
+            hit, c = _segment_hits(q, goal, filt_r, resolution, obs)
             checks += c
             if not hit:
-                ok, c = _edge_free(q, goal, radius, resolution, low, high, box_c, box_r, box_h)
+                ok, c = _edge_free(q, goal, radius, resolution, low, high, obs)
                 checks += c
                 certified += 1
                 if ok:
@@ -489,7 +536,7 @@ def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, 
         _select(stream[t * blk : (t + 1) * blk], count, n_points, idx)
         a = _action(q, goal, idx, pts, nrm, s32, wflat, layout, scale, action_dim, ws)
         _clip_twist(a, scale, tw)
-        hit, c = _q_free(q, tw, radius, low, high, box_c, box_r, box_h, substep, clip_target, new_q)
+        hit, c = _q_free(q, tw, radius, low, high, obs, substep, clip_target, new_q)
         checks += c
         t += 1
         for i in range(d):
@@ -500,7 +547,7 @@ def _rollout(q0, goal, low, high, box_c, box_r, box_h, pts, nrm, wflat, layout, 
         if np.sqrt(dist) < goal_tol and not hit:
             end = END_TOL
             if connect:
-                ok, c = _edge_free(new_q, goal, radius, resolution, low, high, box_c, box_r, box_h)
+                ok, c = _edge_free(new_q, goal, radius, resolution, low, high, obs)
                 checks += c
                 end = END_TOL_GOAL if ok else END_TOL_BLOCKED
             break
@@ -532,7 +579,7 @@ def rollout_ball(
     goal: np.ndarray,
     low: np.ndarray,
     high: np.ndarray,
-    boxes: tuple[np.ndarray, np.ndarray, np.ndarray],
+    boxes: tuple[Any, ...],
     pts: np.ndarray,
     nrm: np.ndarray,
     weights: tuple[np.ndarray, np.ndarray],
@@ -551,14 +598,16 @@ def rollout_ball(
     ``I_ESC_WINDOW`` steps before (``END_ESCAPE``: the path so far, for the caller to go
     on from, as the escape of ``PolicyPlanner`` starts there).
 
-    ``boxes``: ``(centres, rotations, half sides)``; ``pts``, ``nrm``: the observer's
+    ``boxes``: ``(centres, rotations, half sides)``, or those and the other primitives
+    (``CollisionWorld.ball_prims``); ``pts``, ``nrm``: the observer's
     points of the scene and their normals (``(count, 0)`` without); ``weights``: :func:`pack_weights`;
     ``fparams``, ``iparams``: the ``F_*``, ``I_*`` entries. Returns ``(end code, the path
     (the policy's configurations, start first, then the goal when it ends there),
     collision checks, certified goal-edge checks made)``. (``PolicyPlanner`` calls
     :func:`_rollout` directly, with its arguments prepared once.)"""
     path = np.empty((int(iparams[I_HORIZON]) + 2, len(q0)))
-    end, rows, checks, certified = _rollout(
-        q0, goal, low, high, *boxes, pts, nrm, *weights, scale, fparams, iparams, stream, path
+    obs = boxes if len(boxes) == 4 else (*boxes, ())
+    end, rows, checks, certified = _rollout(  # type: ignore[call-arg]
+        q0, goal, low, high, *obs, pts, nrm, *weights, scale, fparams, iparams, stream, path
     )
     return int(end), path[:rows], int(checks), int(certified)

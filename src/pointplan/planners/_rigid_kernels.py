@@ -375,7 +375,7 @@ def _act(  # type: ignore[no-untyped-def]
 def _r_move(kind, q, tw, substep, clip_target, low, high, radius, body, boxes, ws, new_q, scale):  # type: ignore[no-untyped-def]
     """``q_free`` of one step of the ball or the body: ``(collided, checks)``."""
     if kind == BALL:
-        return _q_free(q, tw, radius, low, high, boxes[0], boxes[1], boxes[2], substep, clip_target, new_q)
+        return _q_free(q, tw, radius, low, high, (boxes[0], boxes[1], boxes[2]), substep, clip_target, new_q)
     return _move(q, tw, substep, clip_target, low, high, body, boxes, ws, new_q, scale)
 
 
@@ -387,11 +387,11 @@ def _r_goal_free(kind, q, goal, resolution, low, high, radius, body, boxes, ws, 
         return _edge_free(q, goal, resolution, low, high, body, boxes, ws)
     checks = 0
     if quick:
-        hit, c = _segment_hits(q, goal, radius * (1.0 - 1e-9), resolution, boxes[0], boxes[1], boxes[2])
+        hit, c = _segment_hits(q, goal, radius * (1.0 - 1e-9), resolution, (boxes[0], boxes[1], boxes[2]))
         checks += c
         if hit:
             return False, checks
-    ok, c = _ball_edge_free(q, goal, radius, resolution, low, high, boxes[0], boxes[1], boxes[2])
+    ok, c = _ball_edge_free(q, goal, radius, resolution, low, high, (boxes[0], boxes[1], boxes[2]))
     return ok, checks + c
 
 

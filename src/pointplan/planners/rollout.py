@@ -49,7 +49,7 @@ import numpy as np
 
 from ..envs.core import BatchedCore, EnvConfig, goal_reached, q_free
 from ..geometry.collision import CollisionWorld
-from ..geometry.shapes import Box
+from ..geometry.shapes import Box, Capsule, Cone, Cylinder, Sphere
 from ..robots import ROBOTS, make_robot
 from ..robots.base import Robot
 from ..robots.point import Disc2D, Sphere3D
@@ -344,26 +344,33 @@ def connect_to_goal(
     return result
 
 
+def primitive_obstacles(scene: Scene) -> bool:
+    """Is every obstacle of the single scene (of a moving one: at time 0, its ``world``) a
+    box, sphere, capsule, cylinder or cone (what the balls' compiled goal tests and
+    rollouts check)?"""
+    world = scene.world
+    counts = (world.box_c, world.sph_c, world.cap_a, world.cyl_c, world.con_c)
+    return (
+        world.batch_shape == ()
+        and all(type(o) in (Box, Sphere, Capsule, Cylinder, Cone) for o in scene.obstacles)
+        and sum(a.shape[0] for a in counts) == len(scene.obstacles)
+    )
+
+
 class GoalTester:
     """Is the straight edge from a configuration to the goal free? The certified answer is
     :func:`~pointplan.planners.edges.edge_free` at :data:`GOAL_EDGE_RESOLUTION` (the check
-    of :func:`connect_to_goal`). For a translating ball among boxes a quick test comes
-    first: the plain ball (a hair smaller) at the samples of the edge; if it overlaps a
-    box the edge is certainly not free, and the certified check is skipped (it would say
+    of :func:`connect_to_goal`). For a translating ball among boxes, spheres, capsules,
+    cylinders and cones a quick test comes first: the plain ball (a hair smaller) at the
+    samples of the edge; if it overlaps an obstacle the edge is certainly not free, and the certified check is skipped (it would say
     the same: a certified edge has no configuration touching an obstacle).
     ``tests/test_policy_kernels.py`` checks that implication."""
 
     def __init__(self, robot: Robot, scene: Scene, goal: np.ndarray, resolution: float = GOAL_EDGE_RESOLUTION) -> None:
         self.robot, self.scene, self.goal, self.resolution = robot, scene, goal, resolution
-        world = scene.world
-        self.boxes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        if (
-            isinstance(robot, (Disc2D, Sphere3D))
-            and world.batch_shape == ()
-            and all(type(o) is Box for o in scene.obstacles)
-            and world.box_c.shape[0] == len(scene.obstacles)
-        ):
-            self.boxes = world.box_arrays()
+        self.boxes: tuple[Any, ...] | None = None
+        if isinstance(robot, (Disc2D, Sphere3D)) and primitive_obstacles(scene):
+            self.boxes = (*scene.world.box_arrays(), scene.world.ball_prims())
         self.radius = float(getattr(robot, "radius", 0.0)) * (1.0 - 1e-9)
 
     def free(self, q: np.ndarray, certify: bool = True) -> tuple[bool, int]:

@@ -33,6 +33,7 @@ from ..scenes.scene import Problem, Scene
 from . import _policy_kernels as K
 from . import _rigid_kernels as RK
 from .base import PlanResult
+from .rollout import primitive_obstacles
 
 if TYPE_CHECKING:
     from ..envs.core import EnvConfig
@@ -167,18 +168,14 @@ class CompiledBall:
         return PlanResult(path[:rows], success, steps, checks, time.perf_counter() - t0, info=info), None, None
 
     def _scene_inputs(self, scene: Scene) -> tuple[Any, ...] | None:
-        """The kernel's arguments after the start and the goal for ``scene`` (its bounds and
-        boxes, the observer's points, the engine's arguments, the random stream long
-        enough for the scene), or ``None`` when the scene has obstacles other than boxes
-        or no points."""
+        """The kernel's arguments after the start and the goal for ``scene`` (its bounds,
+        boxes and other primitives, the observer's points, the engine's arguments, the
+        random stream long enough for the scene), or ``None`` when the scene has obstacles
+        other than boxes, spheres, capsules, cylinders and cones, or no points."""
         observer = self.engine.observer
         observer.set_scene(0, scene)
-        world, obstacles = scene.world, scene.obstacles
-        if (
-            world.batch_shape != ()
-            or world.box_c.shape[0] != len(obstacles)
-            or not all(type(o) is Box for o in obstacles)
-        ):
+        world = scene.world
+        if not primitive_obstacles(scene):
             return None
         pts, nrm = observer.points_one()
         if not len(pts):
@@ -187,7 +184,7 @@ class CompiledBall:
         nrm = f(nrm, np.float64) if observer.with_normals else np.zeros((len(pts), 0))
         boxes = world.box_arrays()
         stream = self.engine._uniforms(self.engine.horizon * (max(len(pts), 1) + observer.n_points))
-        return (scene.low, scene.high, *boxes, f(pts, np.float64), nrm, *self.args, stream)
+        return (scene.low, scene.high, *boxes, world.ball_prims(), f(pts, np.float64), nrm, *self.args, stream)
 
     def _end_table(self) -> tuple[tuple[bool, bool, dict[str, Any]], ...]:
         """Per end code: success, whether the path ends at the goal, and the ``info``

@@ -64,6 +64,11 @@ def _dot(a, b, n):  # type: ignore[no-untyped-def]
 
 
 @_jit
+def _within(d2, r2, strict):  # type: ignore[no-untyped-def]
+    return d2 < r2 if strict else d2 <= r2
+
+
+@_jit
 def _segment2_sqdist(px, pz, ax, az, bx, bz):  # type: ignore[no-untyped-def]
     """collision._segment2_sqdist on floats."""
     ux, uz = bx - ax, bz - az
@@ -74,10 +79,11 @@ def _segment2_sqdist(px, pz, ax, az, bx, bz):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _hits_prims(p, r, r2, prims):  # type: ignore[no-untyped-def]
+def _hits_prims(p, r, r2, prims, strict=False):  # type: ignore[no-untyped-def]
     """Does the ball at ``p`` of radius ``r`` (``r2 = r * r``) touch one of the spheres,
     capsules, cylinders or cones of ``prims`` (``CollisionWorld.ball_prims``)? The
-    distances of ``CollisionWorld.spheres_collide``, computed in the same order."""
+    distances of ``CollisionWorld.spheres_collide``, computed in the same order; with
+    ``strict``, only a distance below ``r`` counts (an overlap, not a touch)."""
     sph_c, sph_r, cap_a, cap_b, cap_r, cyl_c, cyl_r, cyl_rad, cyl_half, con_c, con_r, con_rad, con_half = prims
     d = p.shape[0]
     diff = np.empty(d)
@@ -86,7 +92,7 @@ def _hits_prims(p, r, r2, prims):  # type: ignore[no-untyped-def]
         for i in range(d):
             diff[i] = p[i] - sph_c[k, i]
         rr = r + sph_r[k]
-        if _dot(diff, diff, d) <= rr * rr:
+        if _within(_dot(diff, diff, d), rr * rr, strict):
             return True
     for k in range(cap_a.shape[0]):
         for i in range(d):
@@ -97,7 +103,7 @@ def _hits_prims(p, r, r2, prims):  # type: ignore[no-untyped-def]
         for i in range(d):
             diff[i] = diff[i] - t * ab[i]
         rr = r + cap_r[k]
-        if _dot(diff, diff, d) <= rr * rr:
+        if _within(_dot(diff, diff, d), rr * rr, strict):
             return True
     if d == 3:
         for k in range(cyl_c.shape[0] + con_c.shape[0]):
@@ -111,15 +117,15 @@ def _hits_prims(p, r, r2, prims):  # type: ignore[no-untyped-def]
             if not cone:
                 dr = max(rho - cyl_rad[j], 0.0)
                 dz = max(abs(z) - cyl_half[j], 0.0)
-                if dr * dr + dz * dz <= r2:
+                if _within(dr * dr + dz * dz, r2, strict):
                     return True
                 continue
             rad, h = con_rad[j], con_half[j]
-            if z >= -h and z <= h and rho * 2.0 * h <= rad * (h - z):
+            if z >= -h and z <= h and rho * 2.0 * h <= rad * (h - z) and _within(0.0, r2, strict):
                 return True
             d_base = _segment2_sqdist(rho, z, 0.0, -h, rad, -h)
             d_side = _segment2_sqdist(rho, z, rad, -h, 0.0, h)
-            if min(d_base, d_side) <= r2:
+            if _within(min(d_base, d_side), r2, strict):
                 return True
     return False
 
