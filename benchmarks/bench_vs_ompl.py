@@ -250,11 +250,11 @@ def step_parts(planner: Any, problems: list[Problem], reps: int = 200) -> dict[s
             elif kind == 1:
                 K._action(q, goal, idx, pts, nrm, s32, wflat, layout, scale, 2, ws)
             elif kind == 2:
-                K._q_free(q, tw, 0.01, low, high, bc, br, bh, 0.01, True, nq)
+                K._q_free(q, tw, 0.01, low, high, (bc, br, bh), 0.01, True, nq)
             elif kind == 3:
-                K._segment_hits(q, goal, 0.01 * (1 - 1e-9), 0.01, bc, br, bh)
+                K._segment_hits(q, goal, 0.01 * (1 - 1e-9), 0.01, (bc, br, bh))
             else:
-                K._edge_free(q, goal, 0.01, 0.01, low, high, bc, br, bh)
+                K._edge_free(q, goal, 0.01, 0.01, low, high, (bc, br, bh))
 
     compiled = planner.engine.compiled()
     wflat, layout, scale, fparams, iparams = compiled.args
@@ -262,7 +262,7 @@ def step_parts(planner: Any, problems: list[Problem], reps: int = 200) -> dict[s
     names = ("point draw", "network", "move (q_free)", "goal quick test", "goal certified check")
     out: dict[str, list[float]] = {k: [] for k in names}
     for p in problems:
-        _, _, *bx, pts, nrm = compiled._scene_inputs(p.scene)[:7]
+        _, _, *bx, _prims, pts, nrm = compiled._scene_inputs(p.scene)[:8]
         boxes = tuple(bx)
         count = len(pts)
         u = planner.engine._uniforms(count + n_points)[: count + n_points]
@@ -413,7 +413,7 @@ def main() -> None:
         print(
             f"policy scene preparation (the observer's point set of a new workspace, like the collision world untimed above): median {1e6 * float(np.median(scene_prep)):.0f} us"
         )
-        if "policy" in planners and getattr(planners["policy"], "_net", None) is not None:
+        if "policy" in planners and planners["policy"].engine.compiled() is not None:
             for k, v in step_parts(planners["policy"], problems[: min(50, len(problems))]).items():
                 print(f"  policy step parts, median over calls (compiled, called from a compiled loop): {k} {v:.1f} us")
     for a, b in (

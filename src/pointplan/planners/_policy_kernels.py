@@ -73,7 +73,7 @@ def _overlaps(p, radius, r2, obs):  # type: ignore[no-untyped-def]
 
 @overload(_overlaps, jit_options={"nogil": True})
 def _overlaps_impl(p, radius, r2, obs):  # type: ignore[no-untyped-def]
-    if isinstance(obs, types.BaseTuple) and len(obs) == 4:
+    if isinstance(obs, types.BaseTuple) and len(obs) == 4 and isinstance(obs[3], types.BaseTuple):
 
         def boxes_and_prims(p, radius, r2, obs):  # type: ignore[no-untyped-def]
             return _overlaps_boxes(p, r2, obs[0], obs[1], obs[2]) or _hits_prims(p, radius, r2, obs[3], True)
@@ -184,7 +184,8 @@ def _q_free(q, tw, radius, low, high, obs, substep, clip_target, new_q):  # type
 
 @_jit
 def _edge_free(a, b, radius, resolution, low, high, obs):  # type: ignore[no-untyped-def]
-    """``pointplan.planners.edges.edge_free`` for a ball among boxes: ``(free, checks)``."""
+    """``pointplan.planners.edges.edge_free`` for a ball among the obstacles ``obs`` (boxes,
+    or boxes and the other primitives): ``(free, checks)``."""
     d = a.shape[0]
     v = np.empty(d)
     for i in range(d):

@@ -15,8 +15,8 @@ or those and the other primitives ``(..., prims)`` with ``prims`` as
 :func:`_ball_hits` is chosen by the tuple's type when the caller is compiled (so a scene
 of boxes runs the same code as before the other primitives were added). numba's cache
 of the callers in other modules does not see edits here: delete their cache files
-(``__pycache__/_shortcut_kernels.*``, ``planners/__pycache__/_policy_kernels.*``) after
-changing this module.
+(``__pycache__/_shortcut_kernels.*``, ``planners/__pycache__/_policy_kernels.*``,
+``planners/__pycache__/_rigid_kernels.*``) after changing this module.
 """
 
 from __future__ import annotations
@@ -139,7 +139,7 @@ def _ball_hits(p, r, r2, obs):  # type: ignore[no-untyped-def]
 
 @overload(_ball_hits, jit_options={"nogil": True})
 def _ball_hits_impl(p, r, r2, obs):  # type: ignore[no-untyped-def]
-    if isinstance(obs, types.BaseTuple) and len(obs) == 4:
+    if isinstance(obs, types.BaseTuple) and len(obs) == 4 and isinstance(obs[3], types.BaseTuple):
 
         def boxes_and_prims(p, r, r2, obs):  # type: ignore[no-untyped-def]
             return _hits_boxes(p, r2, obs[0], obs[1], obs[2]) or _hits_prims(p, r, r2, obs[3])
