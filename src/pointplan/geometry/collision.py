@@ -78,11 +78,19 @@ def point_segment_sqdist(c: Array, a: Array, b: Array) -> Array:
     return _dot_last(d, d)
 
 
+def _local_frame(c: Array, cc: Array, cr: Array) -> Array:
+    """Points ``c: (..., M, 3)`` in the frames ``cc: (..., K, 3)``, ``cr: (..., K, 3, 3)``
+    (columns the axes): ``(..., M, K, 3)``, ``local_i = sum_j (c_j - cc_j) cr_ji`` added in
+    axis order (as the compiled kernels add)."""
+    diff = c[..., :, None, :] - cc[..., None, :, :]
+    rot = cr[..., None, :, :, :]
+    return np.stack([_dot_last(diff, rot[..., :, i]) for i in range(3)], axis=-1)
+
+
 def point_cylinder_sqdist(c: Array, cc: Array, cr: Array, rad: Array, half: Array) -> Array:
     """Squared distance from points to solid cylinders along their local z axis."""
-    diff = c[..., :, None, :] - cc[..., None, :, :]
-    local = np.einsum("...kji,...mkj->...mki", cr, diff)
-    rho = np.linalg.norm(local[..., :2], axis=-1)
+    local = _local_frame(c, cc, cr)
+    rho = np.sqrt(local[..., 0] * local[..., 0] + local[..., 1] * local[..., 1])
     dr = np.maximum(rho - rad[..., None, :], 0.0)
     dz = np.maximum(np.abs(local[..., 2]) - half[..., None, :], 0.0)
     return dr * dr + dz * dz
@@ -101,9 +109,8 @@ def point_cone_sqdist(c: Array, cc: Array, cr: Array, rad: Array, half: Array) -
     local ``z = -half``, apex at ``z = +half``). The cone is the revolution of the triangle
     (0, -h), (R, -h), (0, h) in the (rho, z) half-plane, so the 3D distance is the 2D distance
     to that triangle."""
-    diff = c[..., :, None, :] - cc[..., None, :, :]
-    local = np.einsum("...kji,...mkj->...mki", cr, diff)
-    rho = np.linalg.norm(local[..., :2], axis=-1)
+    local = _local_frame(c, cc, cr)
+    rho = np.sqrt(local[..., 0] * local[..., 0] + local[..., 1] * local[..., 1])
     z = local[..., 2]
     r = np.broadcast_to(rad[..., None, :], rho.shape)
     h = np.broadcast_to(half[..., None, :], rho.shape)
