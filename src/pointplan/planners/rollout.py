@@ -49,7 +49,6 @@ import numpy as np
 
 from ..envs.core import BatchedCore, EnvConfig, goal_reached, q_free
 from ..geometry.collision import CollisionWorld
-from ..geometry.shapes import Box, Capsule, Cone, Cylinder, Sphere
 from ..robots import ROBOTS, make_robot
 from ..robots.base import Robot
 from ..robots.point import Disc2D, Sphere3D
@@ -344,19 +343,6 @@ def connect_to_goal(
     return result
 
 
-def primitive_obstacles(scene: Scene) -> bool:
-    """Is every obstacle of the single scene (of a moving one: at time 0, its ``world``) a
-    box, sphere, capsule, cylinder or cone (what the balls' compiled goal tests and
-    rollouts check)?"""
-    world = scene.world
-    counts = (world.box_c, world.sph_c, world.cap_a, world.cyl_c, world.con_c)
-    return (
-        world.batch_shape == ()
-        and all(type(o) in (Box, Sphere, Capsule, Cylinder, Cone) for o in scene.obstacles)
-        and sum(a.shape[0] for a in counts) == len(scene.obstacles)
-    )
-
-
 class GoalTester:
     """Is the straight edge from a configuration to the goal free? The certified answer is
     :func:`~pointplan.planners.edges.edge_free` at :data:`GOAL_EDGE_RESOLUTION` (the check
@@ -369,8 +355,9 @@ class GoalTester:
     def __init__(self, robot: Robot, scene: Scene, goal: np.ndarray, resolution: float = GOAL_EDGE_RESOLUTION) -> None:
         self.robot, self.scene, self.goal, self.resolution = robot, scene, goal, resolution
         self.boxes: tuple[Any, ...] | None = None
-        if isinstance(robot, (Disc2D, Sphere3D)) and primitive_obstacles(scene):
-            self.boxes = (*scene.world.box_arrays(), scene.world.ball_prims())
+        world = scene.world  # (a moving scene's at time 0, as below)
+        if isinstance(robot, (Disc2D, Sphere3D)) and world.batch_shape == () and world.primitives_only:
+            self.boxes = (*world.box_arrays(), world.ball_prims())
         self.radius = float(getattr(robot, "radius", 0.0)) * (1.0 - 1e-9)
 
     def free(self, q: np.ndarray, certify: bool = True) -> tuple[bool, int]:

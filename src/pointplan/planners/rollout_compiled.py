@@ -33,7 +33,6 @@ from ..scenes.scene import Problem, Scene
 from . import _policy_kernels as K
 from . import _rigid_kernels as RK
 from .base import PlanResult
-from .rollout import primitive_obstacles
 
 if TYPE_CHECKING:
     from ..envs.core import EnvConfig
@@ -175,7 +174,7 @@ class CompiledBall:
         observer = self.engine.observer
         observer.set_scene(0, scene)
         world = scene.world
-        if not primitive_obstacles(scene):
+        if world.batch_shape != () or not world.primitives_only:
             return None
         pts, nrm = observer.points_one()
         if not len(pts):
