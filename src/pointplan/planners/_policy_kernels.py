@@ -27,10 +27,8 @@ from typing import Any
 
 import numba
 import numpy as np
-from numba import types
-from numba.extending import overload
 
-from ..robots._ball_kernels import _ball_hits, _hits_prims, _motion, _obstacles
+from ..robots._ball_kernels import _ball_hits, _motion, _obstacles
 
 #: as in pointplan.robots.motion (repeated as a literal for the compiler)
 _GRID_SLACK = 1e-9
@@ -47,46 +45,6 @@ _jit_fast = numba.njit(cache=True, nogil=True, fastmath=True)
 
 # ------------------------------------------------------------------ collision tests
 @_jit
-def _overlaps_boxes(p, r2, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
-    """Does the ball at ``p`` overlap a box (squared distance below ``r2``)?"""
-    d = p.shape[0]
-    for k in range(box_c.shape[0]):
-        dist2 = 0.0
-        for i in range(d):  # local coordinate i: column i of the box rotation
-            loc = 0.0
-            for m in range(d):
-                loc += (p[m] - box_c[k, m]) * box_r[k, m, i]
-            ex = abs(loc) - box_h[k, i]
-            if ex > 0.0:
-                dist2 += ex * ex
-        if dist2 < r2:
-            return True
-    return False
-
-
-def _overlaps(p, radius, r2, obs):  # type: ignore[no-untyped-def]
-    """Does the ball at ``p`` overlap (distance below ``radius``) an obstacle of ``obs``
-    (``pointplan.robots._ball_kernels``: boxes, or boxes and the other primitives)?
-    Compiled callers only."""
-    raise NotImplementedError("_overlaps is called from compiled code only")
-
-
-@overload(_overlaps, jit_options={"nogil": True})
-def _overlaps_impl(p, radius, r2, obs):  # type: ignore[no-untyped-def]
-    if isinstance(obs, types.BaseTuple) and len(obs) == 4 and isinstance(obs[3], types.BaseTuple):
-
-        def boxes_and_prims(p, radius, r2, obs):  # type: ignore[no-untyped-def]
-            return _overlaps_boxes(p, r2, obs[0], obs[1], obs[2]) or _hits_prims(p, radius, r2, obs[3], True)
-
-        return boxes_and_prims
-
-    def boxes(p, radius, r2, obs):  # type: ignore[no-untyped-def]
-        return _overlaps_boxes(p, r2, obs[0], obs[1], obs[2])
-
-    return boxes
-
-
-@_jit
 def _segment_hits(a, b, radius, spacing, obs):  # type: ignore[no-untyped-def]
     d = a.shape[0]
     length2 = 0.0
@@ -101,7 +59,7 @@ def _segment_hits(a, b, radius, spacing, obs):  # type: ignore[no-untyped-def]
         s = j / n
         for i in range(d):
             p[i] = a[i] + s * (b[i] - a[i])
-        if _overlaps(p, radius, r2, obs):
+        if _ball_hits(p, radius, r2, obs, True):  # an overlap, not a touch
             return True, j + 1
     return False, n + 1
 

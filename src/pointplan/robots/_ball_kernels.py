@@ -37,8 +37,14 @@ _jit = numba.njit(cache=True, nogil=True)
 
 
 @_jit
-def _hits_boxes(p, r2, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
-    """``any(sphere_box_sqdist(p, boxes) <= r2)``, written as collision.py computes it."""
+def _within(d2, r2, strict):  # type: ignore[no-untyped-def]
+    return d2 < r2 if strict else d2 <= r2
+
+
+@_jit
+def _hits_boxes(p, r2, box_c, box_r, box_h, strict=False):  # type: ignore[no-untyped-def]
+    """``any(sphere_box_sqdist(p, boxes) <= r2)``, written as collision.py computes it
+    (``strict``: ``< r2``, an overlap, not a touch)."""
     d = p.shape[0]
     for k in range(box_c.shape[0]):
         out = 0.0
@@ -50,7 +56,7 @@ def _hits_boxes(p, r2, box_c, box_r, box_h):  # type: ignore[no-untyped-def]
             if ex < 0.0:
                 ex = 0.0
             out += ex * ex
-        if out <= r2:
+        if _within(out, r2, strict):
             return True
     return False
 
@@ -61,11 +67,6 @@ def _dot(a, b, n):  # type: ignore[no-untyped-def]
     for i in range(1, n):
         s += a[i] * b[i]
     return s
-
-
-@_jit
-def _within(d2, r2, strict):  # type: ignore[no-untyped-def]
-    return d2 < r2 if strict else d2 <= r2
 
 
 @_jit
@@ -130,24 +131,24 @@ def _hits_prims(p, r, r2, prims, strict=False):  # type: ignore[no-untyped-def]
     return False
 
 
-def _ball_hits(p, r, r2, obs):  # type: ignore[no-untyped-def]
-    """Does the ball at ``p`` of radius ``r`` (``r2 = r * r``) touch an obstacle of
-    ``obs`` (boxes, or boxes and ``prims``)? Compiled callers only (the version is chosen
-    by the tuple's length)."""
+def _ball_hits(p, r, r2, obs, strict=False):  # type: ignore[no-untyped-def]
+    """Does the ball at ``p`` of radius ``r`` (``r2 = r * r``) touch (``strict``: overlap)
+    an obstacle of ``obs`` (boxes, or boxes and ``prims``)? Compiled callers only (the
+    version is chosen by the tuple's type)."""
     raise NotImplementedError("_ball_hits is called from compiled code only")
 
 
 @overload(_ball_hits, jit_options={"nogil": True})
-def _ball_hits_impl(p, r, r2, obs):  # type: ignore[no-untyped-def]
+def _ball_hits_impl(p, r, r2, obs, strict=False):  # type: ignore[no-untyped-def]
     if isinstance(obs, types.BaseTuple) and len(obs) == 4 and isinstance(obs[3], types.BaseTuple):
 
-        def boxes_and_prims(p, r, r2, obs):  # type: ignore[no-untyped-def]
-            return _hits_boxes(p, r2, obs[0], obs[1], obs[2]) or _hits_prims(p, r, r2, obs[3])
+        def boxes_and_prims(p, r, r2, obs, strict=False):  # type: ignore[no-untyped-def]
+            return _hits_boxes(p, r2, obs[0], obs[1], obs[2], strict) or _hits_prims(p, r, r2, obs[3], strict)
 
         return boxes_and_prims
 
-    def boxes(p, r, r2, obs):  # type: ignore[no-untyped-def]
-        return _hits_boxes(p, r2, obs[0], obs[1], obs[2])
+    def boxes(p, r, r2, obs, strict=False):  # type: ignore[no-untyped-def]
+        return _hits_boxes(p, r2, obs[0], obs[1], obs[2], strict)
 
     return boxes
 
