@@ -6,6 +6,7 @@ what the test modules themselves import.
 
 from __future__ import annotations
 
+import os
 import socket
 from collections.abc import Callable
 from typing import TYPE_CHECKING
@@ -14,6 +15,13 @@ import pytest
 
 if TYPE_CHECKING:
     from pointplan.scenes.scene import Problem
+
+# Under pytest-xdist (the default, pyproject's addopts) each worker is one of several
+# processes on the machine's cores: one thread each for PyTorch, MKL, OpenMP and numba,
+# set before any of them is imported, or the workers slow each other down.
+if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
+    for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
 
 
 @pytest.fixture(scope="session")

@@ -17,7 +17,8 @@ from pointplan.evaluation import evaluate
 from pointplan.planners import BiRRT
 from pointplan.scenes.scenarios import make_scenario
 
-pytestmark = pytest.mark.slow  # Ray starts worker processes
+# Ray starts worker processes; the module's tests share one local cluster, on one test worker
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("ray")]
 
 ray = pytest.importorskip("ray")
 
