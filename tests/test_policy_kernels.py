@@ -369,6 +369,6 @@ def test_ball_against_primitives_decides_ties_as_numpy(dim: int) -> None:
                 lo, hi = (lo, mid) if world.spheres_collide(p[None], mid)[0] else (mid, hi)
             for r in (lo, hi, np.nextafter(lo, 0.0), np.nextafter(hi, 4.0)):
                 want = bool(world.spheres_collide(p[None], r)[0])
-                assert bool(_hits_prims(p, float(r), float(r) * float(r), world.ball_prims())) == want, (kind, r)
+                assert bool(_hits_prims(p, float(r), float(r) * float(r), world.ball_prims(), False)) == want, (kind, r)
                 hits += want
     assert hits > 0

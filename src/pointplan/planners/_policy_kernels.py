@@ -59,7 +59,7 @@ def _segment_hits(a, b, radius, spacing, obs):  # type: ignore[no-untyped-def]
         s = j / n
         for i in range(d):
             p[i] = a[i] + s * (b[i] - a[i])
-        if _ball_hits(p, radius, r2, obs, True):  # an overlap, not a touch
+        if _ball_hits(p, radius, r2, obs, np.True_):  # an overlap, not a touch
             return True, j + 1
     return False, n + 1
 
@@ -136,7 +136,7 @@ def _q_free(q, tw, radius, low, high, obs, substep, clip_target, new_q):  # type
                 target = q[i] + tw[i]
                 v[i] = min(max(target, low[i]), high[i]) - q[i]
     n = _intervals(_norm(v), substep)
-    free, hit, checks = _motion(q, v, n, radius, low, high, obs, True, new_q)
+    free, hit, checks = _motion(q, v, n, radius, low, high, obs, np.True_, new_q)
     return hit, checks
 
 
@@ -151,14 +151,14 @@ def _edge_free(a, b, radius, resolution, low, high, obs):  # type: ignore[no-unt
     length = _norm(v)
     end = np.empty(d)
     if length <= 1e-12:  # check_free of the configuration itself (plain ball, bounds)
-        if _ball_hits(a, radius, radius * radius, obs):
+        if _ball_hits(a, radius, radius * radius, obs, np.False_):
             return False, 1
         for i in range(d):
             if not (a[i] >= low[i] - 1e-9 and a[i] <= high[i] + 1e-9):  # in_bounds' eps
                 return False, 1
         return True, 1
     m = _intervals(length, resolution)
-    free, hit, checks = _motion(a, v, m, radius, low, high, obs, True, end)
+    free, hit, checks = _motion(a, v, m, radius, low, high, obs, np.True_, end)
     return free == m, checks
 
 
@@ -409,7 +409,7 @@ def _action(q, goal, idx, pts, nrm, s32, wflat, layout, scale, action_dim, ws): 
     z = vec[width + features + width :]
     for i in range(d):
         z[i] = np.float32((goal[i] - q[i]) / scale[i])
-    return _network(ws, wflat, layout, d, action_dim, vec[:0], False)
+    return _network(ws, wflat, layout, d, action_dim, vec[:0], np.False_)
 
 
 def pointnet_action(

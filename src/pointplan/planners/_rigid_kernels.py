@@ -131,7 +131,7 @@ def _move(q, tw, substep, clip_target, low, high, body, boxes, ws, new_q, scale)
                 for i in range(6):
                     tw[i] = tw[i] * f
     n = max(1, math.ceil(_norm(tw) / substep - _GRID_SLACK))
-    k, collided, checks = _check_motion(q, tw, n, True, low, high, body, boxes, ws, new_q)
+    k, collided, checks = _check_motion(q, tw, n, np.True_, low, high, body, boxes, ws, new_q)
     if k <= 0:
         for i in range(7):
             new_q[i] = q[i]
@@ -153,7 +153,7 @@ def _edge_free(a, b, resolution, low, high, body, boxes, ws):  # type: ignore[no
     start = poses[3]
     _integrate(a, v, 0.0, start, ws[10])
     m = max(1, math.ceil(d / resolution - _GRID_SLACK))
-    return motion_free(start, v, m, True, low, high, body, boxes, ws)
+    return motion_free(start, v, m, np.True_, low, high, body, boxes, ws)
 
 
 # ------------------------------------------------------------------ the observation
@@ -440,7 +440,7 @@ def _finish(kind, end, path, t, goal, greedy, connect, resolution, low, high, ra
     goal appended where the path ends there. Returns ``(end, rows, checks)``."""
     checks = 0
     if greedy and end in (END_HORIZON, END_STALLED):  # the goal from where the rollout stopped
-        ok, c = _r_goal_free(kind, path[t], goal, resolution, low, high, radius, body, boxes, ws, True)
+        ok, c = _r_goal_free(kind, path[t], goal, resolution, low, high, radius, body, boxes, ws, np.True_)
         checks += c
         if ok:
             end = END_GREEDY
@@ -448,7 +448,7 @@ def _finish(kind, end, path, t, goal, greedy, connect, resolution, low, high, ra
         if _r_distance(kind, path[t], goal, ws[9][0]) <= 0.0:
             end = END_AT_GOAL
         else:
-            ok, c = _r_goal_free(kind, path[t], goal, resolution, low, high, radius, body, boxes, ws, False)
+            ok, c = _r_goal_free(kind, path[t], goal, resolution, low, high, radius, body, boxes, ws, np.False_)
             checks += c
             end = END_TOL_GOAL if ok else END_TOL_BLOCKED
     rows = t + 1
@@ -477,8 +477,8 @@ def _furthest(  # type: ignore[no-untyped-def]
             noise[i] = np.float32(sd * normals[drawn, i])
         drawn += 1
         a = _act(
-            q, goal, u, noise, True, rays, rboxes, pts, nrm, low, high, fparams, iparams, scale, wflat, layout, ows, nws
-        )
+            q, goal, u, noise, np.True_, rays, rboxes, pts, nrm, low, high, fparams, iparams, scale, wflat, layout, ows, nws
+        )  # fmt: skip
         for i in range(adim):
             drew[i] = a[i]  # (``a`` is the network's scratch, which the lookahead reuses)
             tw[i] = np.float64(min(max(a[i], np.float32(-1.0)), np.float32(1.0))) * scale[i]
@@ -514,7 +514,7 @@ def _ahead(  # type: ignore[no-untyped-def]
     checks = 0
     for _ in range(iparams[I_LOOKAHEAD]):
         a = _act(
-            qk, goal, u0, noise, False, rays, rboxes, pts, nrm, low, high, fparams, iparams, scale, wflat, layout, ows, nws
+            qk, goal, u0, noise, np.False_, rays, rboxes, pts, nrm, low, high, fparams, iparams, scale, wflat, layout, ows, nws
         )  # fmt: skip
         for i in range(adim):
             tw[i] = np.float64(min(max(a[i], np.float32(-1.0)), np.float32(1.0))) * scale[i]
@@ -588,12 +588,12 @@ def rollout_rigid(  # type: ignore[no-untyped-def]
     tmp = np.empty(6)
     for i in range(q0.shape[0]):
         path[0, i] = q0[i]
-    checks, escapes, left, t, drawn = 0, 0, 0, 0, 0
+    checks, escapes, left, t, drawn = 0, 0, 0, np.int64(0), np.int64(0)  # (not literals: _ball_kernels says why)
     end = END_HORIZON
     while t < horizon:
         q = path[t]
         if greedy:
-            ok, c = _r_goal_free(kind, q, goal, resolution, low, high, radius, body, boxes, ws, True)
+            ok, c = _r_goal_free(kind, q, goal, resolution, low, high, radius, body, boxes, ws, np.True_)
             checks += c
             if ok:
                 end = END_GREEDY

@@ -17,6 +17,12 @@ of boxes runs the same code as before the other primitives were added). numba's 
 of the callers in other modules does not see edits here: delete their cache files
 (``__pycache__/_shortcut_kernels.*``, ``planners/__pycache__/_policy_kernels.*``,
 ``planners/__pycache__/_rigid_kernels.*``) after changing this module.
+
+Compiled callers pass constant flags as ``np.True_`` / ``np.False_``: numba types a
+literal ``True`` as ``Literal[bool](True)`` and compiles the callee once more for it (and
+once more for ``False``, and for an omitted default), where ``np.True_`` is a plain
+``bool``. The same goes for integer constants (``np.int64(0)``, not ``0``) and for
+read-only arrays (a type of their own).
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ def _within(d2, r2, strict):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _hits_boxes(p, r2, box_c, box_r, box_h, strict=False):  # type: ignore[no-untyped-def]
+def _hits_boxes(p, r2, box_c, box_r, box_h, strict):  # type: ignore[no-untyped-def]
     """``any(sphere_box_sqdist(p, boxes) <= r2)``, written as collision.py computes it
     (``strict``: ``< r2``, an overlap, not a touch)."""
     d = p.shape[0]
@@ -80,7 +86,7 @@ def _segment2_sqdist(px, pz, ax, az, bx, bz):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _hits_prims(p, r, r2, prims, strict=False):  # type: ignore[no-untyped-def]
+def _hits_prims(p, r, r2, prims, strict):  # type: ignore[no-untyped-def]
     """Does the ball at ``p`` of radius ``r`` (``r2 = r * r``) touch one of the spheres,
     capsules, cylinders or cones of ``prims`` (``CollisionWorld.ball_prims``)? The
     distances of ``CollisionWorld.spheres_collide``, computed in the same order; with
@@ -131,7 +137,7 @@ def _hits_prims(p, r, r2, prims, strict=False):  # type: ignore[no-untyped-def]
     return False
 
 
-def _ball_hits(p, r, r2, obs, strict=False):  # type: ignore[no-untyped-def]
+def _ball_hits(p, r, r2, obs, strict):  # type: ignore[no-untyped-def]
     """Does the ball at ``p`` of radius ``r`` (``r2 = r * r``) touch (``strict``: overlap)
     an obstacle of ``obs`` (boxes, or boxes and ``prims``)? Compiled callers only (the
     version is chosen by the tuple's type)."""
@@ -139,15 +145,15 @@ def _ball_hits(p, r, r2, obs, strict=False):  # type: ignore[no-untyped-def]
 
 
 @overload(_ball_hits, jit_options={"nogil": True})
-def _ball_hits_impl(p, r, r2, obs, strict=False):  # type: ignore[no-untyped-def]
+def _ball_hits_impl(p, r, r2, obs, strict):  # type: ignore[no-untyped-def]
     if isinstance(obs, types.BaseTuple) and len(obs) == 4 and isinstance(obs[3], types.BaseTuple):
 
-        def boxes_and_prims(p, r, r2, obs, strict=False):  # type: ignore[no-untyped-def]
+        def boxes_and_prims(p, r, r2, obs, strict):  # type: ignore[no-untyped-def]
             return _hits_boxes(p, r2, obs[0], obs[1], obs[2], strict) or _hits_prims(p, r, r2, obs[3], strict)
 
         return boxes_and_prims
 
-    def boxes(p, r, r2, obs, strict=False):  # type: ignore[no-untyped-def]
+    def boxes(p, r, r2, obs, strict):  # type: ignore[no-untyped-def]
         return _hits_boxes(p, r2, obs[0], obs[1], obs[2], strict)
 
     return boxes
@@ -194,7 +200,7 @@ def _motion(q0, tw, n, radius, low, high, obs, fallback, end):  # type: ignore[n
         s = min(j / n, 1.0)
         for i in range(d):
             cfg[i] = q0[i] + tw[i] * s
-        bad = _ball_hits(cfg, rg, r2g, obs)
+        bad = _ball_hits(cfg, rg, r2g, obs, np.False_)
         if j == 0 and bad and fallback:
             r0 = np.sqrt(radius * radius + (0.0 * 0.0) * seg2) + _CONTACT_MARGIN
             r1 = np.sqrt(radius * radius + (1.0 * 1.0) * seg2) + _CONTACT_MARGIN
@@ -202,7 +208,7 @@ def _motion(q0, tw, n, radius, low, high, obs, fallback, end):  # type: ignore[n
             s1 = min(1 / n, 1.0)
             for i in range(d):
                 cfg1[i] = q0[i] + tw[i] * s1
-            if not _ball_hits(cfg, r0, r0 * r0, obs) and not _ball_hits(cfg1, r1, r1 * r1, obs):
+            if not _ball_hits(cfg, r0, r0 * r0, obs, np.False_) and not _ball_hits(cfg1, r1, r1 * r1, obs, np.False_):
                 bad = False
             checks += 2
         out = False

@@ -178,7 +178,7 @@ def ray_hits_cloud(o, d, grid, oid, limit, bound):  # type: ignore[no-untyped-de
     s2, t2, e2 = _axis_walk(c2, i2, d2 * inv)
     # past ``far`` the ray is more than k cells outside the grid along some axis, for good
     far = min(_axis_exit(c0, d0 * inv, n0, k), _axis_exit(c1, d1 * inv, n1, k), _axis_exit(c2, d2 * inv, n2, k))
-    best, which = limit, -1
+    best, which = limit, np.int64(-1)  # (not the literal -1: one compiled _block_hits)
     entry = 0.0
     # the first cell's whole block, then after each step only the block's new face (the
     # blocks of the cells walked so far are then all tested, each cell about once)

@@ -57,9 +57,9 @@ def _segments_free(kind, verts, k, resolution, low, high, radius, body, boxes, p
         m = max(1, math.ceil(_length(v) / resolution - _GRID_SLACK))
         if kind == 0:
             obs = _obstacles(boxes[0], boxes[1], boxes[2], prims)
-            free, _, c = _motion(verts[e], v, m, radius, low, high, obs, True, last)
+            free, _, c = _motion(verts[e], v, m, radius, low, high, obs, np.True_, last)
         else:
-            free, _, c = _check_motion(verts[e], v, m, True, low, high, body, boxes, ws, last)
+            free, _, c = _check_motion(verts[e], v, m, np.True_, low, high, body, boxes, ws, last)
         checks += c
         ok = ok and free == m
     return ok, checks
@@ -73,7 +73,7 @@ def _locate(cum, x, n_seg):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def shortcut_path(kind, path0, tw0, u, resolution, low, high, radius, body, boxes, prims=()):  # type: ignore[no-untyped-def]
+def shortcut_path(kind, path0, tw0, u, resolution, low, high, radius, body, boxes, prims):  # type: ignore[no-untyped-def]
     """``BiRRT.shortcut`` on ``path0 (L, c)`` with its segments' twists ``tw0 (L - 1, t)``,
     ``len(u) // 2`` iterations: returns ``(path, checks)``. ``boxes``: the obstacles as
     the robot's motion check takes them; ``prims``: the ball's other primitives

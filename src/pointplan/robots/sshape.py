@@ -196,7 +196,7 @@ class SShape(Robot):
         f = np.ascontiguousarray
         out, checks = shortcut_path(
             1, f(path, np.float64), f(twists, np.float64), f(u, np.float64), float(resolution),
-            f(low, np.float64), f(high, np.float64), 0.0, self._body_arrays(), boxes,
+            f(low, np.float64), f(high, np.float64), 0.0, self._body_arrays(), boxes, (),
         )  # fmt: skip
         return out, int(checks)
 
