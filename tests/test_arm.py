@@ -325,8 +325,11 @@ def _cloud_hits_brute(robot: ArmRobot, cloud: Any, q: np.ndarray, radii: np.ndar
 
     c = robot.sphere_centers(q)
     r = robot.model.sphere_radius if radii is None else radii[..., : c.shape[-2]]
-    d, _ = cKDTree(cloud.points).query(c.reshape(-1, 3))
-    return (d.reshape(c.shape[:-1]) <= r + cloud.point_radius()).any(-1)  # type: ignore[no-any-return]
+    reach = r + cloud.point_radius()
+    # nearest points farther than any sphere can reach are not needed: the search stops
+    # there (distance inf), which the comparison reads as no contact
+    d, _ = cKDTree(cloud.points).query(c.reshape(-1, 3), distance_upper_bound=1.01 * float(np.max(reach)))
+    return (d.reshape(c.shape[:-1]) <= reach).any(-1)  # type: ignore[no-any-return]
 
 
 def test_the_compiled_arm_test_takes_a_depth_camera_cloud() -> None:
