@@ -20,7 +20,7 @@ first sub-step (a second, small query for those motions only).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -207,7 +207,11 @@ class FlatMotions:
         dim: int,
         twist_dim: int,
     ) -> FlatMotions:
-        f = np.ascontiguousarray
+        # contiguous and writable: a view that broadcasts nothing is read-only, and numba
+        # compiles its kernels once more for read-only arrays (a type of their own)
+        def f(a: np.ndarray) -> Any:
+            return np.require(a, requirements=("C", "W"))
+
         q0 = np.asarray(q0, np.float64)
         lead, c = q0.shape[:-1], q0.shape[-1]
         m = int(np.prod(lead, dtype=np.int64))

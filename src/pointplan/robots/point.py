@@ -92,9 +92,8 @@ class _Ball(Robot):
         stacked = world.batch_shape != ()
         if not (world.boxes_only or (not stacked and world.primitives_only)) or (stacked and lead != world.batch_shape):
             return super().check_motions(world, q0, twist, n, low, high, fallback)
-        f = np.ascontiguousarray
         fm = FlatMotions.of(q0, twist, n, low, high, fallback, self.dim, self.dim)
-        bc, br, bh = (f(a, np.float64) for a in (world.box_c, world.box_r, world.box_h))
+        bc, br, bh = (np.require(a, np.float64, ("C", "W")) for a in (world.box_c, world.box_r, world.box_h))
         if not stacked:
             bc, br, bh = bc[None], br[None], bh[None]
         prims = () if stacked else world.ball_prims()

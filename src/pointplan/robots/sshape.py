@@ -148,8 +148,7 @@ class SShape(Robot):
                 fm.q0, fm.twist, fm.n, fm.fallback, fm.low, fm.high, body, obstacles, fm.configs, fm.out
             )
         else:
-            f = np.ascontiguousarray
-            boxes = [f(a, np.float64) for a in (world.box_c, world.box_r, world.box_h)]
+            boxes = [np.require(a, np.float64, ("C", "W")) for a in (world.box_c, world.box_r, world.box_h)]
             bc, br, bh = boxes if stacked else [b[None] for b in boxes]
             _body_kernels.check_motions_boxes(
                 fm.q0, fm.twist, fm.n, fm.fallback, fm.low, fm.high, body, bc, br, bh, stacked, fm.configs, fm.out
