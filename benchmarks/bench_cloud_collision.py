@@ -142,12 +142,11 @@ def success(args: argparse.Namespace) -> None:
     import json
     import os
 
-    from tqdm import tqdm
-
     from pointplan.evaluation import check_path
     from pointplan.geometry.sampling import area_weighted_points
     from pointplan.geometry.shapes import PointCloud
     from pointplan.planners import make_planner
+    from pointplan.progress import progress_bar
     from pointplan.scenes.scenarios import make_scenario
     from pointplan.scenes.scene import Problem, Scene
 
@@ -161,7 +160,7 @@ def success(args: argparse.Namespace) -> None:
                 rng = np.random.default_rng(args.seed)
                 planner = make_planner("policy", sc.robot, observation=obs)
                 got = rows.setdefault((robot, obs), [])
-                for i, p in enumerate(tqdm(problems, desc=f"{robot} {obs}", unit="problem")):
+                for i, p in enumerate(progress_bar(problems, desc=f"{robot} {obs}", unit="problem")):
                     pts, nrm, _ = area_weighted_points(p.scene.obstacles, args.points, rng)
                     cloud = Problem(Scene([PointCloud(pts, nrm)], p.scene.low, p.scene.high), p.start, p.goal)
                     t = time.perf_counter()

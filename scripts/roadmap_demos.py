@@ -36,10 +36,9 @@ def log(message: str) -> None:
 
 def build(args: argparse.Namespace) -> None:
     """Build and write the demonstrations; Ctrl-C keeps the problems done."""
-    from tqdm import tqdm
-
     from pointplan.learning.bc import demos_from_paths, save_demos
     from pointplan.learning.roadmap import demo_problem_indices, problem_paths
+    from pointplan.progress import progress_bar
     from pointplan.scenes.scenarios import make_scenario
 
     sc = make_scenario(args.env, robot=args.robot)
@@ -47,7 +46,7 @@ def build(args: argparse.Namespace) -> None:
     paths: list[tuple[int, np.ndarray]] = []
     stats: dict[str, list[float]] = {"build_s": [], "start": [], "goal": [], "reach": []}
     t0 = time.perf_counter()
-    bar = tqdm(indices, desc="roadmap demos", unit="problem", disable=args.quiet)
+    bar = progress_bar(indices, desc="roadmap demos", unit="problem", disable=args.quiet)
     try:
         for n, index in enumerate(bar, 1):
             pp = problem_paths(
@@ -58,7 +57,9 @@ def build(args: argparse.Namespace) -> None:
             stats["start"].append(pp.start is not None)
             stats["goal"].append(len(pp.tree.goal_edges) > 0)
             stats["reach"].append(len(pp.tree.reachable) / len(pp.tree.roadmap))
-            bar.set_postfix(start=f"{np.mean(stats['start']):.2f}", steps=sum(len(p) - 1 for _, p in paths))
+            bar.set_postfix(
+                start=f"{np.mean(stats['start']):.2f}", steps=sum(len(p) - 1 for _, p in paths), refresh=False
+            )
             if args.save_every and n % args.save_every == 0 and paths:
                 save_demos(args.out, sc, demos_from_paths(sc, args.split, args.seed, paths), args.split, args.seed)
     except KeyboardInterrupt:

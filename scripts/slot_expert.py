@@ -73,11 +73,10 @@ def demos(args: argparse.Namespace) -> None:
     """Demonstrations of training problems ``demo_index(seed, demo_n, i)`` for ``i`` in
     ``first .. first + problems - 1``; the file is rewritten every ``--save-every`` solved
     problems and at the end."""
-    from tqdm import tqdm
-
     from pointplan.evaluation.evaluate import check_path
     from pointplan.learning.bc import demos_from_paths, load_demos, resample_path, save_demos
     from pointplan.planners.slot_threading import SlotThreading
+    from pointplan.progress import progress_bar
     from pointplan.robots.sshape import BAR_THICKNESS
     from pointplan.scenes.scenarios import make_scenario
 
@@ -89,7 +88,7 @@ def demos(args: argparse.Namespace) -> None:
     done = {k for k, _ in paths}
     counts = {"solved": 0, "narrower than the template": 0, "wider than --max-bars": 0, "failed": 0, "already": 0}
     new = 0
-    bar = tqdm(
+    bar = progress_bar(
         range(args.first, args.first + args.problems), desc="threading demos", unit="problem", disable=args.quiet
     )
     try:
@@ -117,7 +116,7 @@ def demos(args: argparse.Namespace) -> None:
             new += 1
             if new % args.save_every == 0:
                 save_demos(out, sc, demos_from_paths(sc, "train", args.seed, paths), "train", args.seed)
-            bar.set_postfix(solved=counts["solved"], failed=counts["failed"])
+            bar.set_postfix(solved=counts["solved"], failed=counts["failed"], refresh=False)
     except KeyboardInterrupt:
         log("interrupted: saving what was planned")
     if new:

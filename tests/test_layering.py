@@ -26,6 +26,7 @@ TOP = "pointplan"
 #: bottom up; each name is a subpackage or module directly under src/pointplan
 LAYERS = [
     "config",  # dataclass helpers
+    "progress",  # progress bars for terminals, notebooks and logs
     "_version",
     "parallel",  # the interfaces of worker pools and rollout sources
     "geometry",

@@ -266,16 +266,16 @@ def evaluate(
     report = EvalReport(planner=str(getattr(planner, "name", type(planner).__name__)))
     it: Any = problems
     if progress:
-        from tqdm.auto import tqdm
+        from ..progress import progress_bar
 
-        it = tqdm(problems, desc=report.planner, unit="problem")
+        it = progress_bar(problems, desc=report.planner, unit="problem")
     n_ok = 0
     try:
         for problem in it:
             report.records.append(plan_and_check(planner, problem, robot, resolution, tolerance))
             n_ok += report.records[-1].success
             if progress:
-                it.set_postfix(success=f"{n_ok / len(report.records):.1%}")
+                it.set_postfix(success=f"{n_ok / len(report.records):.1%}", refresh=False)
     except KeyboardInterrupt:  # keep what finished, as the pool path does
         if progress:
             it.close()
@@ -327,16 +327,16 @@ def _evaluate_in(
     bar = None
     solved = [0, 0]
     if progress:
-        from tqdm.auto import tqdm
+        from ..progress import progress_bar
 
-        bar = tqdm(total=n, desc=report.planner, unit="problem")
+        bar = progress_bar(total=n, desc=report.planner, unit="problem")
 
     def tick(_: int, rec: EpisodeRecord) -> None:
         solved[0] += bool(rec.success)
         solved[1] += 1
         if bar is not None:
             bar.update()
-            bar.set_postfix(success=f"{solved[0] / solved[1]:.1%}")
+            bar.set_postfix(success=f"{solved[0] / solved[1]:.1%}", refresh=False)
 
     try:
         records = pool.map(

@@ -147,9 +147,9 @@ def plan_demos(
 
     bar = None
     if progress:
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
-        bar = tqdm(total=len(jobs), desc=desc, unit="problem")
+        bar = progress_bar(total=len(jobs), desc=desc, unit="problem")
     out: list[tuple[int, np.ndarray]] = []
     if pool is not None and not isinstance(pool, Executor):
         # results come back in job order; Ctrl-C keeps the demonstrations that finished
@@ -760,9 +760,9 @@ def fit_actor(
     total_passes = int(np.ceil(epochs))
     passes: Any = range(len(losses), total_passes)
     if progress:
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
-        passes = tqdm(passes, desc="behavioural cloning", unit="epoch", total=total_passes, initial=len(losses))
+        passes = progress_bar(passes, desc="behavioural cloning", unit="epoch", total=total_passes, initial=len(losses))
     obs = stored
     for ep in passes:
         if obs is None or (vary and refresh_every and ep % refresh_every == 0):
@@ -789,7 +789,7 @@ def fit_actor(
         if on_epoch is not None:
             on_epoch({"epoch": len(losses), "loss": losses[-1]})
         if progress:
-            passes.set_postfix(loss=f"{losses[-1]:.4f}")
+            passes.set_postfix(loss=f"{losses[-1]:.4f}", refresh=False)
     if progress:
         passes.close()
     return losses

@@ -268,9 +268,9 @@ def draw_samples(
     scenes, idx, qs, acts, ends, ce, cs = [], [], [], [], [], [], []
     it: Any = range(n_scenes)
     if progress:
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
-        it = tqdm(it, desc=f"{split} samples", unit="workspace")
+        it = progress_bar(it, desc=f"{split} samples", unit="workspace")
     for i in it:
         scene = scenario.scene(split, i)
         cat = _scene_samples(robot, scene, f"{split}/{i}", radius, per_scene, quota, rng, band, label, sampling)
@@ -626,7 +626,9 @@ def _fit_epochs(
                 fit.best_acc, fit.best_epoch = val["accuracy"], ep
                 fit.best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
             if bar is not None:
-                bar.set_postfix(loss=f"{loss:.3f}", val=f"{val['accuracy']:.3f}", best=f"{fit.best_acc:.3f}")
+                bar.set_postfix(
+                    loss=f"{loss:.3f}", val=f"{val['accuracy']:.3f}", best=f"{fit.best_acc:.3f}", refresh=False
+                )
             if stop():
                 break
 
@@ -673,10 +675,10 @@ def train_classifier(
             folder.metrics.drop_after(fit.epoch)
     bar: Any = None
     if progress:
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
         steps = int(np.ceil(len(data["train"].label) / cfg.batch_size))
-        bar = tqdm(
+        bar = progress_bar(
             total=cfg.epochs * steps,
             initial=fit.epoch * steps,
             desc=f"{cfg.observation} classifier",

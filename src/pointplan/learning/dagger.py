@@ -144,9 +144,9 @@ def _threading_labels(
     out = []
     it = labels
     if progress:
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
-        it = tqdm(labels, desc=desc, unit="label")
+        it = progress_bar(labels, desc=desc, unit="label")
     for index, seed, start in it:
         problem = scenario.problem("train", index, seed=seed)
         path = expert.plan(problem, start, seed=index)
@@ -173,9 +173,9 @@ def _roadmap_labels(
         by_problem.setdefault(int(job[3]), []).append(np.asarray(job[7], np.float64))
     items = list(by_problem.items())
     if progress:
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
-        items = tqdm(items, desc=desc, unit="workspace")
+        items = progress_bar(items, desc=desc, unit="workspace")
     out: list[tuple[int, np.ndarray]] = []
     for index, states in items:
         if stop():
@@ -197,9 +197,9 @@ def _roadmap_demos(cfg: DaggerConfig, scenario: Scenario, progress: bool) -> Dem
     indices = demo_problem_indices(b.seed, b.n_problems)
     bar = None
     if progress:
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
-        bar = tqdm(total=len(indices), desc="roadmap demonstrations", unit="problem")
+        bar = progress_bar(total=len(indices), desc="roadmap demonstrations", unit="problem")
     paths = roadmap_demos(
         scenario,
         "train",

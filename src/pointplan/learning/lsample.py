@@ -392,7 +392,7 @@ def train_lsample(
                 }
                 if run.best is not None:
                     post["best_nodes_0.9"] = f"{run.best[0]:.1f}@{run.best[1]}"
-                epochs.set_postfix(post)
+                epochs.set_postfix(post, refresh=False)
             if stop():
                 break
     if progress:

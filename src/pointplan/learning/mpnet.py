@@ -493,7 +493,7 @@ def train_mpnet(
                     post.update(
                         val=f"{row['val_success']:.3f}", best=f"{run.best_val['val_success']:.3f}@{run.best_epoch}"
                     )
-                epochs.set_postfix(post)
+                epochs.set_postfix(post, refresh=False)
             if stop():
                 break
     if progress:

@@ -570,9 +570,9 @@ def train_ppo(
         folder.metrics.drop_after(run.steps)
     bar = None
     if progress:
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
-        bar = tqdm(total=cfg.total_steps, initial=run.steps, unit="step", dynamic_ncols=True)
+        bar = progress_bar(total=cfg.total_steps, initial=run.steps, unit="step", dynamic_ncols=True)
     if run.steps == 0:  # the starting policy, for the curve
         row = {"env_steps": 0.0, "iterations": 0.0, "wall_time_s": run.wall, **run.validate()}
         folder.log(row)
@@ -585,7 +585,7 @@ def train_ppo(
             losses = run.update(run.collect(run.next_rollout()))
             if bar is not None:
                 bar.update(min(run.steps, cfg.total_steps) - min(before, cfg.total_steps))
-                bar.set_postfix(run.postfix())
+                bar.set_postfix(run.postfix(), refresh=False)
             if run.steps >= run.next_eval or run.steps >= cfg.total_steps:
                 run.next_eval += cfg.eval_every
                 row = run.row(losses)

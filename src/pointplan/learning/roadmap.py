@@ -537,9 +537,9 @@ def label_consistency(
     robot = scenario.robot
     idx: Any = range(n_problems)
     if progress:
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
-        idx = tqdm(idx, desc="label consistency", unit="problem")
+        idx = progress_bar(idx, desc="label consistency", unit="problem")
     per: dict[str, list[tuple[float, float]]] = {key: [] for key in _PAIRS}
     for i in idx:
         p = scenario.problem(split, i, seed=seed)

@@ -273,9 +273,9 @@ def epoch_range(done: int, total: int, resume: object, desc: str, progress: bool
         raise ValueError(f"{resume}: the run has done its {done} epochs; give --epochs above that to continue it")
     epochs: Any = range(done + 1, total + 1)
     if progress:
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
-        epochs = tqdm(epochs, desc=desc, unit="epoch", total=total, initial=done)
+        epochs = progress_bar(epochs, desc=desc, unit="epoch", total=total, initial=done)
     return epochs
 
 

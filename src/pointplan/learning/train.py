@@ -526,7 +526,7 @@ def _progress(run: _Run, bar: Any, collected: int) -> None:
             post = {"train_success": f"{np.mean(run.recent):.2f}", "updates": run.agent.updates}
             if run.best >= 0:
                 post["best_val"] = f"{run.best:.3f}"
-            bar.set_postfix(post)
+            bar.set_postfix(post, refresh=False)
 
 
 def _save_last(run: _Run) -> None:
@@ -550,9 +550,9 @@ def _train(
     run = _start(cfg, folder, resume, remote)
     bar = None
     if progress:
-        from tqdm import tqdm
+        from ..progress import progress_bar
 
-        bar = tqdm(total=cfg.total_steps, initial=run.steps, unit="step", dynamic_ncols=True)
+        bar = progress_bar(total=cfg.total_steps, initial=run.steps, unit="step", dynamic_ncols=True)
     stop_now = False
     with folder.ctrl_c(enabled=remote is None) as ctrl_c:  # (Ray rollouts handle Ctrl-C themselves)
         while run.steps < cfg.total_steps and not ctrl_c.requested:
