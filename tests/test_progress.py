@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import copy
 import io
+import re
+import time
 
 import pytest
+import tqdm
 
 from pointplan.evaluation import evaluate
 from pointplan.planners import StraightLine
@@ -25,6 +29,50 @@ def test_log_lines_turns_redraws_into_lines() -> None:
     for text in ("\rbar  0%   ", "\rbar 50%   ", "\r          \r", "a message", "\n", "\rbar 100%", "\n"):
         assert log.write(text) == len(text)
     assert out.getvalue() == "bar  0%\nbar 50%\na message\nbar 100%\n"
+    # a second bar's cursor movements are not written; a copy still writes to the stream
+    log.write("\x1b[A\rbar2 10%\x1b[A")
+    copy.copy(log).write("copied\n")
+    assert out.getvalue().endswith("bar 100%\nbar2 10%\ncopied\n")
+
+
+@pytest.mark.parametrize("manual", [False, True])
+def test_lines_during_a_run_are_current_and_spaced(manual: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A bar over a run of about 1.2 s (over an iterable, or updated by hand with the
+    postfix set first), with a line every 0.2 s: lines during the run, each with its own
+    count and the postfix of that count, none repeating an earlier count, at most one per
+    interval."""
+    monkeypatch.setenv("POINTPLAN_PROGRESS_INTERVAL", "0.2")
+    # tqdm's monitor thread, which redraws bars that have not been drawn for a while, woken
+    # every 0.05 s rather than every 10 s (a fresh one, as a bar starts it when there is none)
+    if tqdm.tqdm.monitor is not None:
+        tqdm.tqdm.monitor.exit()
+        tqdm.tqdm.monitor = None
+    monkeypatch.setattr(tqdm.tqdm, "monitor_interval", 0.05)
+    out = io.StringIO()
+    t0 = time.perf_counter()
+    if manual:
+        bar = progress_bar(total=60, file=out)
+        for i in range(60):
+            time.sleep(0.02)
+            bar.set_postfix(done=i + 1, refresh=False)
+            bar.update()
+    else:
+        bar = progress_bar(range(60), file=out)
+        for i in bar:
+            time.sleep(0.02)
+            bar.set_postfix(done=i + 1, refresh=False)
+    elapsed = time.perf_counter() - t0
+    bar.close()
+    lines = out.getvalue().splitlines()
+    counts = [int(re.search(r"(\d+)/60", line).group(1)) for line in lines]  # type: ignore[union-attr]
+    assert counts[0] == 0 and counts[-1] == 60
+    assert len(lines) >= 4  # lines in the middle of the run, not only the first and the last
+    assert len(lines) <= 2 + elapsed / 0.2 + 1
+    if counts[-2] == 60:  # closing writes the last state again, with its final time
+        counts = counts[:-1]
+    assert all(a < b for a, b in zip(counts[:-1], counts[1:])), counts
+    for line, n in zip(lines[1:], counts[1:]):
+        assert f"done={n}" in line, line
 
 
 def test_a_log_gets_a_line_per_interval_not_per_update(monkeypatch: pytest.MonkeyPatch) -> None:

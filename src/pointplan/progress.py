@@ -12,12 +12,15 @@ state when it closes.
 from __future__ import annotations
 
 import os
+import re
 import sys
 from collections.abc import Iterable
 from typing import IO, Any
 
 #: seconds between two lines of a bar written to a file or a pipe
 LOG_INTERVAL = 60.0
+#: terminal control sequences (tqdm moves the cursor for stacked bars)
+_CONTROL = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")
 
 
 def _is_terminal(stream: Any) -> bool:
@@ -51,8 +54,9 @@ class LogLines:
 
     tqdm redraws a bar by writing ``"\\r"`` and the new state, and clears it for a message
     by writing ``"\\r"``, spaces and ``"\\r"``. Here every stretch of text between carriage
-    returns and newlines that is not blank becomes one line, with trailing spaces removed;
-    blank stretches, and a line equal to the one before it, are dropped."""
+    returns and newlines that is not blank becomes one line, with trailing spaces and
+    terminal control sequences removed; blank stretches, and a line equal to the one before
+    it, are dropped."""
 
     def __init__(self, stream: IO[str]) -> None:
         self.stream = stream
@@ -60,7 +64,7 @@ class LogLines:
 
     def write(self, text: str) -> int:
         out = []
-        for part in text.replace("\r", "\n").split("\n"):
+        for part in _CONTROL.sub("", text).replace("\r", "\n").split("\n"):
             line = part.rstrip()
             if line and line != self._last:
                 out.append(f"{line}\n")
@@ -76,6 +80,8 @@ class LogLines:
         return False
 
     def __getattr__(self, name: str) -> Any:  # encoding, fileno, ... of the stream
+        if name.startswith("__") or "stream" not in self.__dict__:  # (copy, pickle)
+            raise AttributeError(name)
         return getattr(self.stream, name)
 
 
@@ -98,5 +104,7 @@ def progress_bar(iterable: Iterable[Any] | None = None, **kwargs: Any) -> Any:
     interval = kwargs.pop("mininterval", None)
     interval = log_interval() if interval is None else float(interval)
     kwargs.pop("dynamic_ncols", None)  # a file has no width to follow
-    # maxinterval: tqdm's monitor thread redraws a bar that has not been drawn for that long
-    return tqdm(iterable, file=LogLines(stream), mininterval=interval, maxinterval=max(interval, 1.0), **kwargs)
+    # miniters=1: every update looks at the clock, and tqdm's monitor thread (which redraws
+    # a bar with a larger miniters after maxinterval, showing its last count again) keeps away
+    kwargs.setdefault("miniters", 1)
+    return tqdm(iterable, file=LogLines(stream), mininterval=interval, **kwargs)

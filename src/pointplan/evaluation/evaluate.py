@@ -335,8 +335,8 @@ def _evaluate_in(
         solved[0] += bool(rec.success)
         solved[1] += 1
         if bar is not None:
+            bar.set_postfix(success=f"{solved[0] / solved[1]:.1%}", refresh=False)  # first: the update may draw
             bar.update()
-            bar.set_postfix(success=f"{solved[0] / solved[1]:.1%}", refresh=False)
 
     try:
         records = pool.map(

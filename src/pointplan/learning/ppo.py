@@ -584,8 +584,8 @@ def train_ppo(
             before = run.steps
             losses = run.update(run.collect(run.next_rollout()))
             if bar is not None:
+                bar.set_postfix(run.postfix(), refresh=False)  # first: the update may draw the bar
                 bar.update(min(run.steps, cfg.total_steps) - min(before, cfg.total_steps))
-                bar.set_postfix(run.postfix(), refresh=False)
             if run.steps >= run.next_eval or run.steps >= cfg.total_steps:
                 run.next_eval += cfg.eval_every
                 row = run.row(losses)

@@ -521,12 +521,12 @@ def _evaluate(run: _Run, on_eval: Callable[[dict[str, float]], None] | None, bar
 
 def _progress(run: _Run, bar: Any, collected: int) -> None:
     if bar is not None:
-        bar.update(max(0, min(collected, bar.total - bar.n)))  # the last step may overshoot the total
-        if run.recent:
+        if run.recent:  # the postfix first: the update may draw the bar
             post = {"train_success": f"{np.mean(run.recent):.2f}", "updates": run.agent.updates}
             if run.best >= 0:
                 post["best_val"] = f"{run.best:.3f}"
             bar.set_postfix(post, refresh=False)
+        bar.update(max(0, min(collected, bar.total - bar.n)))  # the last step may overshoot the total
 
 
 def _save_last(run: _Run) -> None:
