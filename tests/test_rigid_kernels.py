@@ -149,7 +149,11 @@ def test_network_is_the_numpy_actor(planner: object, problems: list[Problem]) ->
 
 
 def _same(a: object, b: object) -> bool:
-    return bool(a.success == b.success and a.path.shape == b.path.shape and np.allclose(a.path, b.path, atol=1e-5))  # type: ignore[attr-defined]
+    """The same outcome and the same path up to the two networks' float32 round-off, which
+    feeds back through each step's observation and grows along a rollout: up to 2.6e-5
+    after 20 steps of the sphere on an AMD EPYC host (1e-7 elsewhere), where its smallest
+    step is 0.02; paths that part where round-off decides a step differ by a whole step."""
+    return bool(a.success == b.success and a.path.shape == b.path.shape and np.allclose(a.path, b.path, atol=1e-4))  # type: ignore[attr-defined]
 
 
 def test_rollouts_are_the_step_loops(planner: object, problems: list[Problem]) -> None:
