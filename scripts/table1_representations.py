@@ -295,13 +295,19 @@ def plot(out_dir: Path, path: str) -> None:
         ax.set_ylim(0, 100)
         ax.grid(alpha=0.3)
         ax.set_title({"bc": "behavioural cloning", "rl": "reinforcement learning"}[method])
-        if ax.lines:
-            ax.plot([], [], marker="<", ms=8, ls="none", color="0.4", label="the paper's test result")
-            ax.legend(fontsize=8, loc="lower right")
-        else:
+        if not ax.lines:
             ax.text(0.5, 0.5, "not run yet", ha="center", va="center", transform=ax.transAxes, color="0.5")
+    # one legend for both panels, below them, where it hides no curve (a cell has one colour)
+    legend: dict[str, object] = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            legend.setdefault(label, handle)
+    if legend:
+        (paper_marker,) = axes[1].plot([], [], marker="<", ms=8, ls="none", color="0.4")
+        legend["the paper's test result"] = paper_marker
+        fig.legend(list(legend.values()), list(legend), loc="lower center", ncol=len(legend), fontsize=8)
     fig.suptitle("2D-Narrow: obstacle representation x learning method (200 validation problems)")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.06 if legend else 0, 1, 1))
     fig.savefig(path, dpi=110)
     print(f"wrote {path}")
 
