@@ -6,6 +6,8 @@ clouds of 3D-Boxes workspaces (alone or with some of the boxes)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -222,7 +224,9 @@ def test_compiled_march_and_birrt_on_clouds_are_the_numpy_ones(cloud_problems: l
     assert shortened > 0
 
 
-def test_the_points_policy_on_a_cloud_is_compiled_and_the_step_loop(cloud_problems: list[Problem]) -> None:
+def test_the_points_policy_on_a_cloud_is_compiled_and_the_step_loop(
+    cloud_problems: list[Problem], same_rollout: Callable[[object, object], bool]
+) -> None:
     """The S-shape's global policy plans a scanned scene through the compiled rollout (its
     checks against the cloud's grid): the step loop's rollouts, paths free of the cloud."""
     import torch
@@ -237,7 +241,7 @@ def test_the_points_policy_on_a_cloud_is_compiled_and_the_step_loop(cloud_proble
     for p in cloud_problems:
         a, b = fast.plan(p), ref.plan(p)
         assert "compiled" in a.info["time_split"]
-        same += a.success == b.success and a.path.shape == b.path.shape and np.allclose(a.path, b.path, atol=1e-5)
+        same += same_rollout(a, b)
         if a.success:
             assert check_path(SShape(), p, a.path)
     assert same >= len(cloud_problems) - 1
@@ -286,7 +290,9 @@ def test_rays_hit_the_grid_as_the_brute_force(n_points: int, cell: float) -> Non
     assert hits > n // 5
 
 
-def test_the_rays_policy_on_a_cloud_is_compiled_and_the_step_loop(cloud_problems: list[Problem]) -> None:
+def test_the_rays_policy_on_a_cloud_is_compiled_and_the_step_loop(
+    cloud_problems: list[Problem], same_rollout: Callable[[object, object], bool]
+) -> None:
     """The S-shape's local policy sees a scanned scene through the compiled rollout too
     (its rays against the cloud's grid): the step loop's observations and rollouts (its
     rays through ``cast_rays``), paths free of the cloud."""
@@ -303,7 +309,7 @@ def test_the_rays_policy_on_a_cloud_is_compiled_and_the_step_loop(cloud_problems
         a, b = fast.plan(p), ref.plan(p)
         assert "compiled" in a.info["time_split"]
         moved += len(a.path) > 3
-        same += a.success == b.success and a.path.shape == b.path.shape and np.allclose(a.path, b.path, atol=1e-5)
+        same += same_rollout(a, b)
         if a.success:
             assert check_path(SShape(), p, a.path)
     assert same >= len(cloud_problems) - 1 and moved >= 2

@@ -4,6 +4,8 @@ step loop through the batched core (PyTorch network)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
@@ -148,15 +150,9 @@ def test_network_is_the_numpy_actor(planner: object, problems: list[Problem]) ->
             np.testing.assert_allclose(a, ref, rtol=0, atol=2e-6)
 
 
-def _same(a: object, b: object) -> bool:
-    """The same outcome and the same path up to the two networks' float32 round-off, which
-    feeds back through each step's observation and grows along a rollout: up to 2.6e-5
-    after 20 steps of the sphere on an AMD EPYC host (1e-7 elsewhere), where its smallest
-    step is 0.02; paths that part where round-off decides a step differ by a whole step."""
-    return bool(a.success == b.success and a.path.shape == b.path.shape and np.allclose(a.path, b.path, atol=1e-4))  # type: ignore[attr-defined]
-
-
-def test_rollouts_are_the_step_loops(planner: object, problems: list[Problem]) -> None:
+def test_rollouts_are_the_step_loops(
+    planner: object, problems: list[Problem], same_rollout: Callable[[object, object], bool]
+) -> None:
     """Whole rollouts (greedy goal test, escapes, goal connection) against the one-robot
     step loop with the numpy network: the networks differ by float32 round-off, so a
     rollout may part where that decides a step; nearly all agree, and every compiled
@@ -169,7 +165,7 @@ def test_rollouts_are_the_step_loops(planner: object, problems: list[Problem]) -
         if a.success:
             solved += 1
             assert check_path(SShape(), p, a.path)
-        if _same(a, b):
+        if same_rollout(a, b):
             same += 1
             assert a.collision_checks == b.collision_checks
             assert {k: v for k, v in a.info.items() if k != "time_split"} == {
@@ -180,7 +176,9 @@ def test_rollouts_are_the_step_loops(planner: object, problems: list[Problem]) -
     assert escapes > 0 and solved >= len(problems) // 2
 
 
-def test_sampled_attempts_are_the_step_loops(problems: list[Problem], one_torch_thread: None) -> None:
+def test_sampled_attempts_are_the_step_loops(
+    problems: list[Problem], one_torch_thread: None, same_rollout: Callable[[object, object], bool]
+) -> None:
     kw = {"observation": "local", "attempts": 3}
     fast = make_planner("policy", SShape(), **kw)
     ref = make_planner("policy", SShape(), compiled=False, **kw)
@@ -188,11 +186,13 @@ def test_sampled_attempts_are_the_step_loops(problems: list[Problem], one_torch_
     for p in problems[:10]:
         a, b = fast.plan(p), ref.plan(p)
         retried += a.info.get("attempts", 1) > 1
-        same += _same(a, b)
+        same += same_rollout(a, b)
     assert retried > 0 and same >= 8
 
 
-def test_the_sphere_seeing_rays_is_the_step_loop(one_torch_thread: None) -> None:
+def test_the_sphere_seeing_rays_is_the_step_loop(
+    one_torch_thread: None, same_rollout: Callable[[object, object], bool]
+) -> None:
     """The sphere's local policy: compiled up to where its first escape (toward a random
     subgoal) starts, then the step loop; against the step loop all the way."""
     from pointplan.robots.point import Sphere3D
@@ -205,7 +205,7 @@ def test_the_sphere_seeing_rays_is_the_step_loop(one_torch_thread: None) -> None
         a, b = fast.plan(p), ref.plan(p)
         assert "compiled" in a.info["time_split"]
         handed += a.info["escapes"] > 0
-        same += _same(a, b)
+        same += same_rollout(a, b)
         if a.success:
             assert check_path(Sphere3D(), p, a.path)
     assert same >= len(problems) - 2 and handed > 0
@@ -340,7 +340,9 @@ def test_compiled_march_and_nearest_are_the_numpy_ones(problems: list[Problem]) 
     assert shortened > 0
 
 
-def test_the_sshape_seeing_points_is_the_step_loop(problems: list[Problem], one_torch_thread: None) -> None:
+def test_the_sshape_seeing_points_is_the_step_loop(
+    problems: list[Problem], one_torch_thread: None, same_rollout: Callable[[object, object], bool]
+) -> None:
     """The S-shape's global policy (a subset of the scene's surface points), compiled,
     against the one-robot step loop with the numpy network: escapes included."""
     fast = make_planner("policy", SShape(), observation="global")
@@ -351,13 +353,15 @@ def test_the_sshape_seeing_points_is_the_step_loop(problems: list[Problem], one_
         a, b = fast.plan(p), ref.plan(p)
         assert "compiled" in a.info["time_split"] and "compiled" not in b.info["time_split"]
         escapes += a.info["escapes"]
-        same += _same(a, b)
+        same += same_rollout(a, b)
         if a.success:
             assert check_path(SShape(), p, a.path)
     assert same >= 10 and escapes > 0
 
 
-def test_back_off_is_the_step_loops(problems: list[Problem], one_torch_thread: None) -> None:
+def test_back_off_is_the_step_loops(
+    problems: list[Problem], one_torch_thread: None, same_rollout: Callable[[object, object], bool]
+) -> None:
     """The escape's back-off in the kernel against ``rollout._back_off`` on random paths
     (the body and the ball), then whole rollouts: with escape draws of no spread each draw
     is the mean action that just failed to move, so every escape step backs off; the
@@ -399,16 +403,18 @@ def test_back_off_is_the_step_loops(problems: list[Problem], one_torch_thread: N
                 "policy", SShape(), observation="local", compiled=compiled, escape=replace(esc, backoff=backoff)
             )
             plans[backoff, compiled] = [pl.plan(p) for p in problems[:12]]  # type: ignore[attr-defined]
-    same = sum(_same(a, b) for a, b in zip(plans[0.03, True], plans[0.03, False]))
+    same = sum(same_rollout(a, b) for a, b in zip(plans[0.03, True], plans[0.03, False]))
     assert same >= 11
-    assert any(not _same(a, b) for a, b in zip(plans[0.0, True], plans[0.03, True]))
+    assert any(not same_rollout(a, b) for a, b in zip(plans[0.0, True], plans[0.03, True]))
     for p, a in zip(problems[:12], plans[0.03, True]):
         assert "compiled" in a.info["time_split"]
         if a.success:
             assert check_path(SShape(), p, a.path)
 
 
-def test_the_sshape_told_its_orientation_is_the_step_loop(one_torch_thread: None) -> None:
+def test_the_sshape_told_its_orientation_is_the_step_loop(
+    one_torch_thread: None, same_rollout: Callable[[object, object], bool]
+) -> None:
     """The S-shape told its orientation (the world's axes in the body frame beside the goal
     twist, ``I_AXES``) takes the compiled rollout: its goal input and action are the numpy
     actor's, and its Slot plans (the back-off, 64 draws and the lookahead of its default
@@ -443,7 +449,7 @@ def test_the_sshape_told_its_orientation_is_the_step_loop(one_torch_thread: None
     for p in problems:
         a, b = fast_planner.plan(p), ref.plan(p)  # type: ignore[attr-defined]
         assert "compiled" in a.info["time_split"] and "compiled" not in b.info["time_split"]
-        same += _same(a, b)
+        same += same_rollout(a, b)
         if a.success:
             solved += 1
             assert check_path(robot, p, a.path)
